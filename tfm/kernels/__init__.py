@@ -1,0 +1,1 @@
+"""Pure jitted array functions. They know nothing of the model, files or parameters."""

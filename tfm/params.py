@@ -1,0 +1,281 @@
+"""One frozen, validated parameter record per run, named after the paper's symbols.
+
+Hulikal, Bhattacharya & Lapusta, "A threshold-force model for adhesion and mode I
+fracture" (see ``shared/paper``). Everything is in the paper's nondimensional units:
+length L*, force F* = 2 pi G L*^2 / (1 - nu), so C_ij = 1/r_ij.
+
+The record's hash (with the result schema version) is the run id, so two runs with the
+same parameters are the same run. Bad values fail at construction with a message that
+names the parameter and the allowed range.
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field, fields
+from fractions import Fraction
+from typing import Any, Mapping
+
+from .config import SCHEMA_VERSION
+
+SHAPES = ("sphere", "paraboloid", "flat_punch")
+KERNELS = ("boussinesq", "local", "neighbors")
+OPERATORS = ("fft", "direct", "tree")
+LAYOUTS = ("square", "hexagonal", "jittered")
+SNAP_RULES = ("batch", "single")
+PRECONDITIONERS = ("auto", "stencil", "fft", "none")
+
+
+class ParameterError(ValueError):
+    """A run parameter is missing, malformed or outside its allowed range."""
+
+
+def parse_number(value: Any, name: str) -> float:
+    """Accept floats, ints and fraction strings such as ``"1/64"``."""
+    if isinstance(value, bool):
+        raise ParameterError(f"{name}: expected a number, got a boolean {value!r}")
+    if isinstance(value, (int, float)):
+        return float(value)
+    if isinstance(value, str):
+        text = value.strip()
+        try:
+            if "/" in text:
+                num, den = text.split("/", 1)
+                return float(Fraction(num.strip())) / float(Fraction(den.strip()))
+            return float(text)
+        except (ValueError, ZeroDivisionError):
+            pass
+    raise ParameterError(f"{name}: cannot read {value!r} as a number (use e.g. 0.5, 2e-5 or 1/64)")
+
+
+@dataclass(frozen=True)
+class Params:
+    """Parameters of one loading-unloading run (the paper's symbols).
+
+    Threshold: ``f_th = k_th * A**alpha`` with A the spring's area (spacing**2 on the
+    square grid), unless an explicit ``f_th`` is given (then ``k_th`` must be None).
+    """
+
+    # discretization and threshold
+    spacing: float = 1.0 / 128          # Delta
+    alpha: float = 0.75                 # threshold exponent
+    k_th: float | None = None           # K_th
+    f_th: float | None = 2e-5           # explicit F_th (paper's Fig. 3 default)
+    # geometry
+    radius: float = 1.0                 # R
+    shape: str = "sphere"
+    # interaction kernel
+    kernel: str = "boussinesq"
+    self_term: float = 3.8              # C_ii = self_term / spacing (Love's regularization)
+    neighbor_rings: int = 1             # m, kernel="neighbors": keep 1/r for r <= m*spacing
+    c_w: float = 1.0                    # kernel="local": C_ii = c_w / A (Winkler)
+    # numerics
+    operator: str = "fft"
+    theta: float = 0.5                  # Barnes-Hut opening angle (operator="tree")
+    layout: str = "square"
+    jitter: float = 0.25                # layout="jittered": offsets in units of spacing
+    seed: int = 0                       # layout="jittered"
+    # loading protocol: load to max_indent in steps of `step`, unload until no contact
+    max_indent: float | str = 0.05      # delta_max, or "auto" (from the JKR radius)
+    step: float = 2.5e-4
+    snap_rule: str = "batch"            # paper: all violators change at once
+    # solver
+    tol: float = 1e-10                  # relative residual of the contact solve
+    max_iter: int = 2000                # CG iterations per solve
+    max_rounds: int = 10000             # snap/enter rounds per step
+    max_unload_steps: int | None = None  # None: 20 * loading steps + 1000
+    preconditioner: str = "auto"
+    # grid extent (half-width of the square region holding the springs); None = auto
+    extent: float | None = None
+    extent_margin: float = 1.3          # auto extent = margin * Hertz radius + 4 spacings
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+    # ---- derived quantities -------------------------------------------------
+    @property
+    def threshold_force(self) -> float:
+        """F_th for a spring of area spacing**2 (the square grid's spring)."""
+        if self.f_th is not None:
+            return float(self.f_th)
+        return float(self.k_th) * (self.spacing ** 2) ** self.alpha
+
+    @property
+    def delta_max(self) -> float:
+        """The preload depth, resolving ``max_indent="auto"``."""
+        if self.max_indent == "auto":
+            from .theory import auto_max_indent
+            return auto_max_indent(self)
+        return float(self.max_indent)
+
+    @property
+    def half_width(self) -> float:
+        if self.extent is not None:
+            return float(self.extent)
+        # Hertz radius for the elastic kernel; the geometric one where the kernel is
+        # short-ranged (Winkler-like) and the contact spreads further.
+        factor = 1.0 if self.kernel == "boussinesq" else 2.0
+        a_max = math.sqrt(factor * self.radius * self.delta_max)
+        if self.shape == "flat_punch":
+            a_max = self.radius
+        return self.extent_margin * a_max + 4.0 * self.spacing
+
+    # ---- (de)serialization ------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def canonical_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+
+    @property
+    def run_id(self) -> str:
+        text = f"schema={SCHEMA_VERSION};" + self.canonical_json()
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any], *, where: str = "") -> "Params":
+        """Build from loose input (CLI, TOML): fractions accepted, unknown keys refused."""
+        names = cls.field_names()
+        prefix = f"{where}: " if where else ""
+        clean: dict[str, Any] = {}
+        for key, value in values.items():
+            if key not in names:
+                close = difflib.get_close_matches(key, names, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise ParameterError(f"{prefix}unknown parameter {key!r}{hint}")
+            clean[key] = _coerce(key, value, prefix)
+        # an explicit k_th without f_th means "use k_th"
+        if clean.get("k_th") is not None and "f_th" not in clean:
+            clean["f_th"] = None
+        try:
+            return cls(**clean)
+        except ParameterError as exc:
+            raise ParameterError(f"{prefix}{exc}") from None
+
+    def replace(self, **changes: Any) -> "Params":
+        if changes.get("k_th") is not None and "f_th" not in changes:
+            changes["f_th"] = None
+        return dataclasses.replace(self, **changes)
+
+
+_FLOAT_FIELDS = {"spacing", "alpha", "k_th", "f_th", "radius", "self_term", "c_w", "theta",
+                 "jitter", "step", "tol", "extent", "extent_margin"}
+_INT_FIELDS = {"neighbor_rings", "seed", "max_iter", "max_rounds", "max_unload_steps"}
+
+
+def _coerce(key: str, value: Any, prefix: str) -> Any:
+    try:
+        if value is None:
+            return None
+        if key in _FLOAT_FIELDS:
+            return parse_number(value, key)
+        if key == "max_indent":
+            return value if value == "auto" else parse_number(value, key)
+        if key in _INT_FIELDS:
+            number = parse_number(value, key)
+            if not number.is_integer():
+                raise ParameterError(f"{key}: expected a whole number, got {value!r}")
+            return int(number)
+        return value
+    except ParameterError as exc:
+        raise ParameterError(f"{prefix}{exc}") from None
+
+
+def _finite(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f"{name}: expected a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ParameterError(f"{name}: must be finite, got {value!r}")
+    return float(value)
+
+
+def _positive(name: str, value: Any, upper: float = math.inf) -> None:
+    v = _finite(name, value)
+    if not 0.0 < v <= upper:
+        bound = "" if upper == math.inf else f" and <= {upper:g}"
+        raise ParameterError(f"{name}: must be > 0{bound}, got {v!r}")
+
+
+def _choice(name: str, value: Any, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        close = difflib.get_close_matches(str(value), allowed, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ParameterError(f"{name}: unknown value {value!r}; allowed: {', '.join(allowed)}{hint}")
+
+
+def _integer(name: str, value: Any, low: int, high: int | None = None) -> None:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ParameterError(f"{name}: expected an integer, got {value!r}")
+    if value < low or (high is not None and value > high):
+        rng = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ParameterError(f"{name}: must be {rng}, got {value!r}")
+
+
+def _validate(p: Params) -> None:
+    _positive("spacing", p.spacing, upper=1.0)
+    a = _finite("alpha", p.alpha)
+    if not -1.0 <= a <= 3.0:
+        raise ParameterError(f"alpha: must be in [-1, 3], got {a!r}")
+    if p.k_th is None and p.f_th is None:
+        raise ParameterError("k_th / f_th: give one threshold, k_th (F_th = k_th A^alpha) or f_th")
+    if p.k_th is not None and p.f_th is not None:
+        raise ParameterError("k_th / f_th: give only one of k_th and f_th, not both")
+    for name in ("k_th", "f_th"):
+        value = getattr(p, name)
+        if value is not None and _finite(name, value) < 0:
+            raise ParameterError(f"{name}: must be >= 0 (a tensile threshold), got {value!r}")
+    _positive("radius", p.radius)
+    _choice("shape", p.shape, SHAPES)
+    _choice("kernel", p.kernel, KERNELS)
+    _positive("self_term", p.self_term)
+    _integer("neighbor_rings", p.neighbor_rings, 1, 64)
+    _positive("c_w", p.c_w)
+    _choice("operator", p.operator, OPERATORS)
+    _positive("theta", p.theta, upper=1.5)
+    _choice("layout", p.layout, LAYOUTS)
+    j = _finite("jitter", p.jitter)
+    if not 0.0 <= j < 0.5:
+        raise ParameterError(f"jitter: must be in [0, 0.5) spacings so springs never cross, got {j!r}")
+    _integer("seed", p.seed, 0)
+    if p.max_indent != "auto":
+        _positive("max_indent", p.max_indent)
+    _positive("step", p.step)
+    _choice("snap_rule", p.snap_rule, SNAP_RULES)
+    _positive("tol", p.tol, upper=1e-2)
+    _integer("max_iter", p.max_iter, 1)
+    _integer("max_rounds", p.max_rounds, 1)
+    if p.max_unload_steps is not None:
+        _integer("max_unload_steps", p.max_unload_steps, 1)
+    _choice("preconditioner", p.preconditioner, PRECONDITIONERS)
+    _positive("extent_margin", p.extent_margin)
+    if p.extent is not None:
+        _positive("extent", p.extent)
+    # relations between parameters
+    dmax = p.delta_max
+    if p.step > dmax:
+        raise ParameterError(f"step: must be <= max_indent ({dmax:g}), got {p.step!r}")
+    if dmax / p.step > 1e6:
+        raise ParameterError(f"step: max_indent/step = {dmax / p.step:.3g} steps; must be <= 1e6")
+    if p.shape == "sphere" and dmax >= p.radius:
+        raise ParameterError(f"max_indent: must be < radius ({p.radius:g}) for a sphere, got {dmax!r}")
+    hw = p.half_width
+    if p.spacing > hw:
+        raise ParameterError(f"spacing: must be <= the grid half-width ({hw:g}); got {p.spacing!r}")
+    n_side = 2 * math.ceil(hw / p.spacing) + 1
+    if n_side > 8193:
+        raise ParameterError(f"extent/spacing: the grid would have {n_side} springs a side; "
+                             f"the limit is 8193 (shrink extent or enlarge spacing)")
+    if p.kernel == "neighbors" and p.layout != "square":
+        raise ParameterError("kernel: 'neighbors' counts rings of the square grid; use layout='square'")
+    if p.operator == "fft" and p.layout != "square":
+        raise ParameterError(f"operator: 'fft' needs a regular square grid, but layout={p.layout!r}; "
+                             "use operator='tree' or 'direct'")
+    if p.preconditioner in ("stencil", "fft") and p.layout != "square":
+        raise ParameterError(f"preconditioner: {p.preconditioner!r} needs layout='square'; use 'auto' or 'none'")

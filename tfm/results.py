@@ -1,0 +1,180 @@
+"""Per-step curve table, run summary, provenance, and Parquet with metadata.
+
+Columns of the curve follow the issue: step, phase, d, indent, force (compressive
+positive, as in the paper's plots), contact_area, contact_radius, n_contact, n_snapped,
+n_entered, rounds, solver_iters.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+import platform
+import subprocess
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from .config import SCHEMA_VERSION
+from .params import Params
+
+CURVE_COLUMNS = ["step", "phase", "d", "indent", "force", "contact_area", "contact_radius",
+                 "n_contact", "n_snapped", "n_entered", "rounds", "solver_iters"]
+
+
+def tfm_version() -> str:
+    from . import __version__
+    return __version__
+
+
+def git_commit() -> str | None:
+    here = Path(__file__).resolve().parent
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
+                             text=True, timeout=5)
+        if out.returncode != 0:
+            return None
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+        return out.stdout.strip() + ("-dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def provenance() -> dict[str, Any]:
+    import numba
+    import scipy
+    return {
+        "tfm_version": tfm_version(),
+        "git_commit": git_commit(),
+        "schema_version": SCHEMA_VERSION,
+        "python_version": platform.python_version(),
+        "numpy_version": np.__version__,
+        "numba_version": numba.__version__,
+        "scipy_version": scipy.__version__,
+        "host": platform.node(),
+        "started_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+@dataclass
+class RunResult:
+    """What one run produced: its parameters, the curve, the summary and provenance."""
+
+    params: Params
+    curve: pd.DataFrame
+    summary: dict[str, Any]
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return not self.summary["warnings"]
+
+    def write_curve(self, path: str | os.PathLike) -> Path:
+        return write_table(self.curve, path, self.params, self.provenance, self.summary)
+
+
+def curve_frame(steps) -> pd.DataFrame:
+    df = pd.DataFrame([s.__dict__ for s in steps])
+    if df.empty:
+        df = pd.DataFrame({c: [] for c in CURVE_COLUMNS})
+    df["indent"] = -df["d"]
+    df["contact_radius"] = np.sqrt(df["contact_area"] / math.pi)
+    df = df[CURVE_COLUMNS]
+    return df.astype({"step": "int64", "n_contact": "int64", "n_snapped": "int64",
+                      "n_entered": "int64", "rounds": "int64", "solver_iters": "int64"})
+
+
+def summarize(curve: pd.DataFrame, out, p: Params, n_springs: int, grid_side: int | None) -> dict[str, Any]:
+    unload = curve[curve["phase"] == "unload"]
+    tension = -curve["force"].to_numpy()
+    k = int(np.argmax(tension)) if len(curve) else 0
+    warnings = []
+    if out.edge_steps:
+        warnings.append(f"contact reached the grid edge at {out.edge_steps} steps "
+                        f"(half-width {p.half_width:g}); enlarge extent or extent_margin")
+    if out.solver_failures:
+        warnings.append(f"contact solve did not converge {out.solver_failures} times "
+                        f"(worst relative residual {out.max_residual:.2e}, tol {p.tol:g}); raise max_iter")
+    if out.rounds_exceeded:
+        warnings.append(f"snap/enter rounds hit max_rounds={p.max_rounds} at {out.rounds_exceeded} steps")
+    if not out.unload_complete:
+        warnings.append("unloading stopped at max_unload_steps with springs still in contact")
+    first_snap = unload[unload["n_snapped"] > 0]
+    return {
+        "pull_off_force": float(max(tension[k], 0.0)) if len(curve) else 0.0,
+        "pull_off_indent": float(curve["indent"].iloc[k]) if len(curve) else math.nan,
+        "pull_off_contact_radius": float(curve["contact_radius"].iloc[k]) if len(curve) else math.nan,
+        "max_indent": p.delta_max,
+        "f_th": p.threshold_force,
+        "max_force": float(curve["force"].max()) if len(curve) else 0.0,
+        "max_contact_radius": float(curve["contact_radius"].max()) if len(curve) else 0.0,
+        "first_snap_indent": float(first_snap["indent"].iloc[0]) if len(first_snap) else math.nan,
+        "n_steps": int(len(curve)),
+        "n_solves": int(out.n_solves),
+        "solver_iters": int(out.solver_iters),
+        "max_residual": float(out.max_residual),
+        "n_springs": int(n_springs),
+        "grid_side": grid_side,
+        "half_width": p.half_width,
+        "wall_time": float(out.wall_time),
+        "contact_reached_edge": bool(out.edge_steps),
+        "solver_not_converged": bool(out.solver_failures),
+        "rounds_exceeded": bool(out.rounds_exceeded),
+        "unload_complete": bool(out.unload_complete),
+        "warnings": "; ".join(warnings),
+    }
+
+
+def _json_default(obj):
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.floating,)):
+        return float(obj)
+    return str(obj)
+
+
+def write_table(df: pd.DataFrame, path, params: Params | None = None, prov=None, summary=None,
+                extra: dict[str, Any] | None = None) -> Path:
+    """Write a table atomically (temporary file, then rename) with tfm metadata."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table = pa.Table.from_pandas(df, preserve_index=False)
+    meta = dict(table.schema.metadata or {})
+    meta[b"tfm.schema_version"] = str(SCHEMA_VERSION).encode()
+    meta[b"tfm.version"] = tfm_version().encode()
+    if params is not None:
+        meta[b"tfm.params"] = params.canonical_json().encode()
+        meta[b"tfm.run_id"] = params.run_id.encode()
+    if prov is not None:
+        meta[b"tfm.provenance"] = json.dumps(prov, sort_keys=True, default=_json_default).encode()
+    if summary is not None:
+        meta[b"tfm.summary"] = json.dumps(summary, sort_keys=True, default=_json_default).encode()
+    for key, value in (extra or {}).items():
+        meta[f"tfm.{key}".encode()] = json.dumps(value, sort_keys=True, default=_json_default).encode()
+    table = table.replace_schema_metadata(meta)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    pq.write_table(table, tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def read_metadata(path) -> dict[str, Any]:
+    """The tfm metadata of a Parquet file, decoded (params, provenance, summary, ...)."""
+    meta = pq.read_schema(path).metadata or {}
+    out = {}
+    for key, value in meta.items():
+        k = key.decode()
+        if k.startswith("tfm."):
+            v = value.decode()
+            try:
+                out[k[4:]] = json.loads(v)
+            except json.JSONDecodeError:
+                out[k[4:]] = v
+    return out

@@ -1,0 +1,52 @@
+"""One run: a parameter record in, a curve and a summary out."""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from .geometry import heights, make_layout
+from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
+from .params import Params
+from .results import RunResult, curve_frame, provenance, summarize
+from .solver import Problem, run_protocol
+
+
+class RunWarning(UserWarning):
+    """A run finished but its numbers are suspect (edge reached, no convergence, ...)."""
+
+
+def build_problem(p: Params) -> tuple[Problem, object]:
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    symbol = grid_symbol(spec, layout) if layout.shape is not None else None
+    check_positive_definite(p, spec, layout, symbol)
+    op = make_operator(p, spec, layout, symbol)
+    pre = make_preconditioner(p, spec, layout, symbol)
+    if p.f_th is not None:
+        f_th = np.full(layout.n, float(p.f_th))
+    else:
+        f_th = p.k_th * layout.area ** p.alpha
+    prob = Problem(x0=heights(p, layout), f_th=f_th, area=layout.area, edge=layout.edge,
+                   operator=op, precond=pre, tol=p.tol, max_iter=p.max_iter,
+                   max_rounds=p.max_rounds, snap_rule=p.snap_rule)
+    return prob, layout
+
+
+def simulate(p: Params | None = None, *, progress=None, **overrides) -> RunResult:
+    """Run the paper's loading-unloading protocol. ``simulate(spacing=1/64, k_th=0.02)``
+    and ``simulate(Params(...))`` both work. Suspect results carry flags and warn."""
+    if p is None:
+        p = Params.from_dict(overrides) if overrides else Params()
+    elif overrides:
+        p = p.replace(**overrides)
+    prov = provenance()
+    prob, layout = build_problem(p)
+    n_load = int(np.ceil(p.delta_max / p.step - 1e-9))
+    max_unload = p.max_unload_steps or (20 * n_load + 1000)
+    out = run_protocol(prob, p.delta_max, p.step, max_unload, progress=progress)
+    curve = curve_frame(out.steps)
+    summary = summarize(curve, out, p, layout.n, layout.shape[0] if layout.shape else None)
+    if summary["warnings"]:
+        warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
+    return RunResult(p, curve, summary, prov)
