@@ -26,7 +26,7 @@ KERNELS = ("boussinesq", "local", "neighbors")
 OPERATORS = ("fft", "direct", "tree")
 LAYOUTS = ("square", "hexagonal", "jittered")
 SNAP_RULES = ("batch", "single")
-PRECONDITIONERS = ("auto", "stencil", "fft", "none")
+PRECONDITIONERS = ("auto", "fft", "stencil", "diagonal", "none")
 
 
 class ParameterError(ValueError):

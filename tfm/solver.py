@@ -137,7 +137,6 @@ class ContactState:
         guess = self.F
         if self._slope is not None and self._last_d is not None:
             guess = self.F + (d - self._last_d) * self._slope
-        start_set = self.contact.copy()
         start_F = self.F.copy()
         rounds = iters = snapped = entered = 0
         while True:
@@ -167,8 +166,9 @@ class ContactState:
             entered += int(into.sum())
             guess = self.F.copy()
             guess[over] = 0.0
-        # slope for the next step's warm start, valid while the set is unchanged
-        if self._last_d is not None and np.array_equal(start_set, self.contact) and d != self._last_d:
+        # dF/dd for the next step's warm start. Exact while the contact set is unchanged
+        # (F is linear in d for a fixed set); still a good guess after small changes.
+        if self._last_d is not None and d != self._last_d:
             self._slope = (self.F - start_F) / (d - self._last_d)
         else:
             self._slope = None

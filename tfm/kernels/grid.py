@@ -33,35 +33,59 @@ def stencil_apply(ii, jj, vals, n, stencil):
     return out
 
 
-@njit(**PARALLEL_OPTS)
+@njit(**NUMBA_OPTS)
 def blocked_dot(a, b):
-    """Dot product summed in fixed blocks: same bits for any thread count."""
+    """Dot product summed in fixed blocks, then over blocks in order: the same bits on
+    any machine thread count (a parallel version would add the same partials)."""
     n = a.size
-    nb = (n + REDUCTION_BLOCK - 1) // REDUCTION_BLOCK
-    part = np.zeros(nb)
-    for k in prange(nb):
-        lo = k * REDUCTION_BLOCK
+    total = 0.0
+    for lo in range(0, n, REDUCTION_BLOCK):
         hi = min(n, lo + REDUCTION_BLOCK)
         acc = 0.0
         for i in range(lo, hi):
             acc += a[i] * b[i]
-        part[k] = acc
-    total = 0.0
-    for k in range(nb):
-        total += part[k]
+        total += acc
     return total
 
 
 @njit(**NUMBA_OPTS)
-def scatter_grid(buf, n, idx, vals):
-    """Write vals at flat indices idx of an n x n block at the corner of a zeroed buffer."""
+def index_box(n, idx):
+    """Bounding box (i0, j0, width) of flat indices on an n x n grid."""
+    i0 = n
+    j0 = n
+    i1 = -1
+    j1 = -1
     for k in range(idx.size):
-        f = idx[k]
-        buf[f // n, f % n] = vals[k]
+        i = idx[k] // n
+        j = idx[k] % n
+        i0 = min(i0, i)
+        i1 = max(i1, i)
+        j0 = min(j0, j)
+        j1 = max(j1, j)
+    return i0, j0, max(i1 - i0, j1 - j0) + 1
 
 
 @njit(**NUMBA_OPTS)
-def clear_grid(buf, n, idx):
+def scatter_box(buf, n, i0, j0, idx, vals):
+    """buf[i - i0, j - j0] = vals for the flat grid indices idx (buf zeroed by caller)."""
     for k in range(idx.size):
         f = idx[k]
-        buf[f // n, f % n] = 0.0
+        buf[f // n - i0, f % n - j0] = vals[k]
+
+
+@njit(**NUMBA_OPTS)
+def gather_box(box, n, i0, j0, idx):
+    out = np.empty(idx.size)
+    for k in range(idx.size):
+        f = idx[k]
+        out[k] = box[f // n - i0, f % n - j0]
+    return out
+
+
+@njit(**NUMBA_OPTS)
+def clear_box(buf, n, i0, j0, idx):
+    for k in range(idx.size):
+        f = idx[k]
+        buf[f // n - i0, f % n - j0] = 0.0
+
+

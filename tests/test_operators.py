@@ -1,0 +1,96 @@
+"""Fast operators against their slow twins: FFT, direct sum and a NumPy double loop."""
+import numpy as np
+import pytest
+
+from naive import compliance_double_loop
+from tfm import Params
+from tfm.geometry import make_layout
+from tfm.operators import (DirectOperator, FFTOperator, IllPosedKernel, check_positive_definite,
+                           grid_symbol, kernel_spec, make_preconditioner)
+
+# Round-off: each output sums ~200 terms of size <= 3.8/spacing; relative error ~1e-15
+# per term, so 1e-12 relative to the largest entry leaves a wide margin for FFT round-off.
+RTOL = 1e-12
+
+KERNELS = [dict(kernel="boussinesq"), dict(kernel="local", c_w=0.7),
+           dict(kernel="neighbors", neighbor_rings=2), dict(kernel="neighbors", neighbor_rings=3)]
+
+
+def tiny(**kw):
+    # 15 x 15 = 225 springs
+    base = dict(spacing=1 / 8, extent=7 / 8, k_th=0.02, max_indent=0.01, step=1e-3)
+    base.update(kw)
+    return Params.from_dict(base)
+
+
+@pytest.mark.parametrize("kw", KERNELS, ids=lambda k: "-".join(map(str, k.values())))
+def test_fft_direct_and_double_loop_agree(kw):
+    p = tiny(**kw)
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    C = compliance_double_loop(layout.x, layout.y, spec.diag, p.kernel, spec.cutoff)
+    rng = np.random.default_rng(1)
+    F = rng.normal(size=layout.n)
+    ref = C @ F
+    scale = np.abs(ref).max()
+    fft, direct = FFTOperator(spec, layout), DirectOperator(spec, layout)
+    every = np.arange(layout.n)
+    for op in (fft, direct):
+        assert np.allclose(op.apply(every, F), ref, rtol=0, atol=RTOL * scale)
+    # sparse sources and targets, as in the contact solve and the penetration check
+    src = np.sort(rng.choice(layout.n, 40, replace=False))
+    tgt = np.sort(rng.choice(layout.n, 60, replace=False))
+    ref_sub = C[np.ix_(tgt, src)] @ F[src]
+    for op in (fft, direct):
+        assert np.allclose(op.apply(src, F[src], tgt), ref_sub, rtol=0, atol=RTOL * scale)
+        assert np.allclose(op.apply(src, F[src], src), C[np.ix_(src, src)] @ F[src], rtol=0, atol=RTOL * scale)
+
+
+def test_fft_box_is_exact_linear_convolution():
+    """Sources in one corner, targets in the opposite one: a periodic image would show."""
+    p = tiny()
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    n = layout.shape[0]
+    src = np.array([0, 1, n])             # corner (0,0), (0,1), (1,0)
+    tgt = np.array([n * n - 1, n * n - 2])
+    f = np.array([1.0, -2.0, 0.5])
+    C = compliance_double_loop(layout.x, layout.y, spec.diag, "boussinesq", np.inf)
+    got = FFTOperator(spec, layout).apply(src, f, tgt)
+    assert np.allclose(got, C[np.ix_(tgt, src)] @ f, rtol=RTOL, atol=0)
+
+
+def test_four_neighbour_kernel_with_paper_self_term_is_refused():
+    # 3.8 - 4 (four neighbours at r = 1, sign (-1) at the checkerboard) < 0
+    p = tiny(kernel="neighbors", neighbor_rings=1)
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    with pytest.raises(IllPosedKernel, match="not positive definite"):
+        check_positive_definite(p, spec, layout)
+    # the symbol really is negative at the checkerboard mode (pi, pi)
+    sym, P = grid_symbol(spec, layout)
+    assert sym[P // 2, P // 2] < 0 if P % 2 == 0 else sym.min() < 0
+
+
+def test_boussinesq_with_small_self_term_is_refused_and_paper_value_accepted():
+    # the alternating lattice sum of 1/r is about -1.6155, so self_term 1.0 is indefinite
+    p = tiny(self_term=1.0)
+    layout = make_layout(p)
+    with pytest.raises(IllPosedKernel, match="self_term"):
+        check_positive_definite(p, kernel_spec(p, layout), layout)
+    q = tiny()
+    assert check_positive_definite(q, kernel_spec(q, make_layout(q)), make_layout(q)) > 0
+
+
+@pytest.mark.parametrize("choice", ["fft", "stencil", "diagonal"])
+def test_preconditioners_are_symmetric_positive_definite(choice):
+    """PCG needs an SPD preconditioner on every contact set; check on a random set."""
+    p = tiny(preconditioner=choice)
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    M = make_preconditioner(p, spec, layout)
+    idx = np.sort(np.random.default_rng(2).choice(layout.n, 80, replace=False))
+    dense = np.column_stack([M(idx, e) for e in np.eye(idx.size)])
+    # symmetric to round-off of a few FFTs
+    assert np.allclose(dense, dense.T, rtol=0, atol=1e-12 * np.abs(dense).max())
+    assert np.linalg.eigvalsh(0.5 * (dense + dense.T)).min() > 0

@@ -1,0 +1,74 @@
+"""Bad input fails early, with a message naming the parameter and the allowed range."""
+import math
+
+import pytest
+
+from tfm import ParameterError, Params
+from tfm.params import parse_number
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(spacing=0), "spacing: must be > 0"),
+    (dict(spacing=-1 / 64), "spacing: must be > 0"),
+    (dict(spacing=math.nan), "spacing: must be finite"),
+    (dict(spacing=0.5, extent=0.1), "spacing: must be <= the grid half-width"),
+    (dict(k_th=-0.02, f_th=None), "k_th: must be >= 0"),
+    (dict(f_th=-1e-5), "f_th: must be >= 0"),
+    (dict(k_th=0.02, f_th=2e-5), "only one of k_th and f_th"),
+    (dict(k_th=None, f_th=None), "give one threshold"),
+    (dict(alpha=math.inf), "alpha: must be finite"),
+    (dict(alpha=7.0), r"alpha: must be in \[-1, 3\]"),
+    (dict(radius=0.0), "radius: must be > 0"),
+    (dict(kernel="bousinesq"), "did you mean 'boussinesq'"),
+    (dict(shape="cube"), "shape: unknown value 'cube'"),
+    (dict(operator="fmm"), "operator: unknown value"),
+    (dict(max_indent=2.0), "max_indent: must be < radius"),
+    (dict(step=0.1, max_indent=0.05), "step: must be <= max_indent"),
+    (dict(step=0.0), "step: must be > 0"),
+    (dict(tol=0.5), "tol: must be > 0 and <= 0.01"),
+    (dict(neighbor_rings=0), r"neighbor_rings: must be in \[1, 64\]"),
+    (dict(neighbor_rings=1.5), "neighbor_rings: expected an integer"),
+    (dict(layout="hexagonal"), "operator: 'fft' needs a regular square grid"),
+    (dict(jitter=0.7, layout="jittered", operator="direct"), "jitter"),
+    (dict(spacing=1e-5, extent=1.0), "springs a side"),
+])
+def test_bad_values_are_refused_with_a_clear_message(kw, match):
+    with pytest.raises(ParameterError, match=match):
+        Params(**kw)
+
+
+def test_from_dict_accepts_fractions_and_names_unknown_keys():
+    p = Params.from_dict({"spacing": "1/64", "k_th": "0.02", "max_indent": "auto"})
+    assert p.spacing == 1 / 64 and p.k_th == 0.02 and p.f_th is None
+    assert p.delta_max > 0
+    with pytest.raises(ParameterError, match="unknown parameter 'k_t'.*did you mean 'k_th'"):
+        Params.from_dict({"k_t": 0.02}, where="file.toml")
+    with pytest.raises(ParameterError, match="spacing: cannot read '1/x'"):
+        Params.from_dict({"spacing": "1/x"})
+
+
+def test_parse_number_forms():
+    assert parse_number("1/256", "s") == 1 / 256
+    assert parse_number(" 2e-5 ", "s") == 2e-5
+    with pytest.raises(ParameterError):
+        parse_number(True, "s")
+
+
+def test_run_id_is_stable_and_parameter_sensitive():
+    a = Params(spacing=1 / 64)
+    assert a.run_id == Params.from_dict({"spacing": "1/64"}).run_id
+    assert a.run_id != Params(spacing=1 / 32).run_id
+    assert len(a.run_id) == 16
+
+
+def test_threshold_and_defaults_follow_the_paper():
+    p = Params()  # the paper's Fig. 3 case
+    assert (p.spacing, p.f_th, p.radius, p.shape, p.self_term) == (1 / 128, 2e-5, 1.0, "sphere", 3.8)
+    q = Params(k_th=0.02, f_th=None, alpha=0.75, spacing=1 / 64)
+    assert q.threshold_force == pytest.approx(0.02 * (1 / 64) ** 1.5)
+
+
+def test_params_are_frozen():
+    p = Params()
+    with pytest.raises(Exception):
+        p.spacing = 0.1
