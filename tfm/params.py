@@ -79,7 +79,7 @@ class Params:
     jitter: float = 0.25                # layout="jittered": offsets in units of spacing
     seed: int = 0                       # layout="jittered"
     # loading protocol: load to max_indent in steps of `step`, unload until no contact
-    max_indent: float | str = 0.05      # delta_max, or "auto" (from the JKR radius)
+    max_indent: float | str = "auto"    # delta_max, or "auto": deep enough for the JKR pull-off
     step: float = 2.5e-4
     snap_rule: str = "batch"            # paper: all violators change at once
     # solver

@@ -25,8 +25,8 @@ def plot_curve(curve, params=None, path=None, title=None, hertz=True):
     if hertz and params is not None and params.shape in ("sphere", "paraboloid") and params.kernel == "boussinesq":
         delta = np.linspace(0, params.delta_max, 200)
         P = theory.hertz_force(delta, params.radius)
-        ax1.plot(delta, P, "k--", lw=0.8, label="Hertz")
-        ax2.plot(P, theory.hertz_radius(delta, params.radius), "k--", lw=0.8, label="Hertz")
+        ax1.plot(delta, P, "k--", lw=0.8, label="Hertz (paraboloid)")
+        ax2.plot(P, theory.hertz_radius(delta, params.radius), "k--", lw=0.8, label="Hertz (paraboloid)")
     ax1.set_xlabel("indentation $\\delta = -d$")
     ax1.set_ylabel("force $P$ (compression > 0)")
     ax2.set_xlabel("force $P$ (compression > 0)")
