@@ -1,0 +1,371 @@
+"""Campaigns: TOML -> validated runs -> Parquet tables; resume, failures, Dask, bitwise equality.
+
+The campaign used throughout is campaigns/smoke.toml (6 coarse runs, a few seconds).
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+
+from tfm.campaign import (CampaignError, CampaignStore, load_failures, load_spec, load_tables,
+                          run_campaign, spec_from_dict)
+from tfm.cli import main as tfm_main
+from tfm.config import SCHEMA_VERSION
+from tfm.params import Params
+from tfm.results import CURVE_COLUMNS, read_metadata
+
+REPO = Path(__file__).resolve().parents[1]
+SMOKE = REPO / "campaigns" / "smoke.toml"
+N_SMOKE = 6
+
+# Columns that legitimately differ between two executions of the same run.
+VOLATILE = ("r_wall_time",)
+
+
+def result_view(summary: pd.DataFrame) -> pd.DataFrame:
+    """The columns a run's parameters alone must determine: ids, params, results."""
+    cols = [c for c in summary.columns if not c.startswith("prov_") and c not in VOLATILE]
+    return summary[cols].reset_index(drop=True)
+
+
+def assert_bitwise_equal(a: pd.DataFrame, b: pd.DataFrame) -> None:
+    """Same columns, same dtypes, and float columns equal bit for bit (not to a tolerance)."""
+    assert list(a.columns) == list(b.columns)
+    assert len(a) == len(b)
+    for col in a.columns:
+        assert a[col].dtype == b[col].dtype, col
+        x, y = a[col].to_numpy(), b[col].to_numpy()
+        if x.dtype.kind == "f":
+            differ = x.view(np.uint64) != y.view(np.uint64)
+            assert not differ.any(), (f"{col}: {differ.sum()} values differ, first at row "
+                                      f"{np.argmax(differ)}: {x[differ][0]!r} vs {y[differ][0]!r}")
+        else:
+            assert a[col].equals(b[col]), col
+
+
+@pytest.fixture(scope="module")
+def serial_run(tmp_path_factory):
+    """The smoke campaign, uninterrupted, in this process (--jobs 1)."""
+    results = tmp_path_factory.mktemp("serial")
+    root = run_campaign(SMOKE, jobs=1, quiet=True, results_dir=results)
+    return results, root
+
+
+# ---- expansion and validation ------------------------------------------------
+def test_expansion_is_stable_and_zips_move_together():
+    a, b = load_spec(SMOKE), load_spec(SMOKE)
+    assert a.run_ids == b.run_ids
+    assert len(a.runs) == N_SMOKE == len(set(a.run_ids))
+    assert [r.run_id for r in a.runs] == [r.params.run_id for r in a.runs]
+    pairs = {(r.params.radius, r.params.max_indent) for r in a.runs}
+    assert pairs == {(0.5, 0.025), (1.0, 0.05), (2.0, 0.1)}        # zipped, not crossed
+    assert {r.params.alpha for r in a.runs} == {0.5, 0.75}
+    assert all(r.params.spacing == 1 / 16 and r.params.f_th is None for r in a.runs)
+
+
+def test_run_id_is_the_params_hash_with_schema_version():
+    spec = spec_from_dict({"name": "x", "base": {"spacing": "1/256", "k_th": 0.02, "shape": "paraboloid",
+                                                 "max_indent": 0.01, "step": 1e-3}})
+    (run,) = spec.runs
+    assert run.params.spacing == 1 / 256                              # fractions accepted
+    assert run.run_id == Params.from_dict(dict(spacing=1 / 256, k_th=0.02, shape="paraboloid",
+                                               max_indent=0.01, step=1e-3)).run_id
+
+
+def _write(tmp_path, text: str) -> Path:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    return path
+
+
+BASE = 'name = "bad"\n[base]\nspacing = "1/16"\nk_th = 0.02\nshape = "paraboloid"\nmax_indent = 0.025\n'
+
+
+@pytest.mark.parametrize("text, expected", [
+    (BASE + "[sweep]\nalpah = [0.5, 0.75]\n", ["[sweep]", "unknown parameter 'alpah'", "did you mean 'alpha'"]),
+    (BASE.replace("spacing", "spacng"), ["[base]", "'spacng'", "did you mean 'spacing'"]),
+    (BASE + "[sweep]\nalpha = [0.5, 5]\n", ["run 1 (alpha=5)", "alpha: must be in [-1, 3]"]),
+    (BASE + "[sweep]\nkernel = ['local', 'bousinesq']\n", ["run 1", "kernel: unknown value", "did you mean 'boussinesq'"]),
+    (BASE + "[sweep]\nstep = ['1/0']\n", ["step", "cannot read '1/0' as a number"]),
+    ("descripton = 'x'\n" + BASE, ["unknown top-level key 'descripton'", "did you mean 'description'"]),
+    (BASE + "description = 'x'\n", ["[base]: unknown parameter 'description'", "must come before the first"]),
+    (BASE.replace('"bad"', '"../up"'), ["name", "folder-safe"]),
+    ('description = "no name"\n', ["name"]),
+    (BASE + "[sweep]\nalpha = 0.5\n", ["[sweep] alpha", "needs a list"]),
+    (BASE + "[sweep]\nalpha = []\n", ["[sweep] alpha", "empty list"]),
+    (BASE + "[[zip]]\nradius = [0.5, 1.0]\nstep = [1e-3]\n", ["[[zip]] #1", "same length", "radius has 2"]),
+    (BASE + "[sweep]\nspacing = ['1/16', '1/32']\n", ["'spacing' is set in both [base] and [sweep]"]),
+    (BASE + "[sweep]\nradius = [0.5, 0.50]\n", ["run 1", "same run as run 0"]),
+    (BASE + "[sweep\nalpha = [1]\n", ["not valid TOML"]),
+])
+def test_malformed_campaign_files_fail_clearly(tmp_path, text, expected):
+    path = _write(tmp_path, text)
+    with pytest.raises(CampaignError) as info:
+        load_spec(path)
+    message = str(info.value)
+    assert message.startswith(str(path)), message                     # names the file
+    for part in expected:
+        assert part in message, message
+
+
+def test_cli_reports_a_bad_file_and_runs_nothing(tmp_path, capsys):
+    path = _write(tmp_path, BASE + "[sweep]\nalpha = [0.5, 7]\n")
+    assert tfm_main(["campaign", "run", str(path), "--results-dir", str(tmp_path / "res")]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "alpha: must be in [-1, 3]" in err
+    assert not (tmp_path / "res").exists()                            # validated before anything ran
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(CampaignError, match="no such campaign file"):
+        load_spec(tmp_path / "nope.toml")
+
+
+# ---- tables --------------------------------------------------------------------
+def test_tables_have_expected_columns_and_rows(serial_run):
+    results, root = serial_run
+    summary, curves = load_tables("smoke", results_dir=results)
+    spec = load_spec(SMOKE)
+    assert summary["run_id"].tolist() == spec.run_ids                  # expansion order, once each
+    assert (summary["status"] == "ok").all()
+    assert list(summary.columns[:2]) == ["run_id", "status"]
+    assert [c for c in summary.columns if c.startswith("p_")] == ["p_" + n for n in Params.field_names()]
+    for col in ("r_pull_off_force", "r_pull_off_indent", "r_max_contact_radius", "r_n_solves",
+                "r_solver_iters", "r_wall_time", "r_contact_reached_edge", "r_solver_not_converged",
+                "prov_tfm_version", "prov_git_commit", "prov_numba_version", "prov_numpy_version",
+                "prov_host", "prov_started_at", "prov_numba_threads"):
+        assert col in summary.columns, col
+    assert all(c in ("run_id", "status") or c.split("_", 1)[0] in ("p", "r", "prov") for c in summary.columns)
+    assert summary["p_max_indent"].tolist() == ["0.025", "0.05", "0.1"] * 2
+    assert summary["r_max_indent"].tolist() == [0.025, 0.05, 0.1] * 2
+    assert (summary["r_pull_off_force"] > 0).all()
+
+    assert list(curves.columns) == ["run_id"] + CURVE_COLUMNS
+    assert len(curves) == summary["r_n_steps"].sum()
+    assert curves["run_id"].drop_duplicates().tolist() == spec.run_ids
+    assert (curves.groupby("run_id", sort=False).size().to_numpy() == summary["r_n_steps"].to_numpy()).all()
+    assert len(load_failures("smoke", results_dir=results)) == 0
+
+    for table in ("summary", "curves", "failures"):
+        meta = read_metadata(root / f"{table}.parquet")
+        assert meta["schema_version"] == SCHEMA_VERSION
+        assert meta["campaign"]["run_ids"] == spec.run_ids
+    # a plain pyarrow reader sees the same table
+    assert pq.read_table(root / "summary.parquet").num_rows == N_SMOKE
+
+
+def test_rerun_does_no_work(serial_run, monkeypatch):
+    results, root = serial_run
+    before = {p: p.stat().st_mtime_ns for p in root.rglob("*.parquet")}
+
+    def boom(*args, **kwargs):
+        raise AssertionError("a finished run was run again")
+
+    monkeypatch.setattr("tfm.campaign.runner.execute", boom)
+    assert run_campaign(SMOKE, jobs=2, quiet=True, results_dir=results) == root
+    assert {p: p.stat().st_mtime_ns for p in root.rglob("*.parquet")} == before
+
+
+@pytest.mark.parametrize("ci, quiet, bar, line", [("true", False, False, True), ("", False, True, True),
+                                                 ("", True, False, False)])
+def test_progress_bar_is_quiet_with_quiet_and_in_ci(tmp_path, monkeypatch, capsys, ci, quiet, bar, line):
+    monkeypatch.setenv("CI", ci)
+    tiny = spec_from_dict({"name": "tiny", "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
+                                                    "radius": 0.5, "max_indent": 0.025, "step": 5e-3}})
+    run_campaign(tiny, quiet=quiet, results_dir=tmp_path)
+    err = capsys.readouterr().err
+    assert ("1/1" in err) == bar, err                       # the bar counts runs: "1/1 [...]"
+    assert ("campaign tiny: 1 runs done, 0 failed" in err) == line, err
+
+
+def test_status_list_and_expand_commands(serial_run, tmp_path, capsys):
+    results, _ = serial_run
+    assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(results)]) == 0
+    out = capsys.readouterr().out
+    assert f"smoke: {N_SMOKE} runs: {N_SMOKE} done (0 flagged), 0 pending, 0 failed" in out
+    assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path)]) == 0
+    assert f"0 done (0 flagged), {N_SMOKE} pending" in capsys.readouterr().out
+    assert tfm_main(["campaign", "list", "--dir", str(SMOKE.parent), "--results-dir", str(results)]) == 0
+    assert any(line.split()[:5] == ["smoke", str(N_SMOKE), "runs", str(N_SMOKE), "done"]
+               for line in capsys.readouterr().out.splitlines())
+    assert tfm_main(["campaign", "expand", str(SMOKE)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[1] for line in lines] == load_spec(SMOKE).run_ids
+
+
+# ---- failures ------------------------------------------------------------------
+def test_a_failing_run_is_recorded_and_the_others_finish(tmp_path, monkeypatch, capsys):
+    sim_module = importlib.import_module("tfm.simulate")     # the package re-exports the function
+    spec = load_spec(SMOKE)
+    victim = spec.runs[2]
+    real = sim_module.simulate
+
+    def flaky(params, **kwargs):
+        if params.run_id == victim.run_id:
+            raise FloatingPointError("injected failure")
+        return real(params, **kwargs)
+
+    spec2 = spec_from_dict({"name": "flaky", "base": {k: v for k, v in spec.base.items()},
+                            "sweep": spec.sweep, "zip": list(spec.zips)})
+    monkeypatch.setattr(sim_module, "simulate", flaky)
+    root = run_campaign(spec2, quiet=True, results_dir=tmp_path)
+    summary, curves = load_tables(root)
+    failures = load_failures(root)
+    assert len(summary) == N_SMOKE - 1 and victim.run_id not in set(summary["run_id"])
+    assert failures["run_id"].tolist() == [victim.run_id]
+    assert failures["p_radius"].iloc[0] == victim.params.radius
+    assert "FloatingPointError: injected failure" in failures["error"].iloc[0]
+    assert "injected failure" in failures["traceback"].iloc[0] and "Traceback" in failures["traceback"].iloc[0]
+    assert tfm_main(["campaign", "status", "--results-dir", str(tmp_path), str(_toml_of(spec2, tmp_path))]) == 0
+    assert "1 failed" in capsys.readouterr().out
+
+    # the failure is retried on the next run, and disappears once the run succeeds
+    monkeypatch.setattr(sim_module, "simulate", real)
+    run_campaign(spec2, quiet=True, results_dir=tmp_path)
+    summary, _ = load_tables(root)
+    assert summary["run_id"].tolist() == spec.run_ids
+    assert len(load_failures(root)) == 0
+
+
+def _toml_of(spec, folder: Path) -> Path:
+    """Write a spec back as a campaign file (for the CLI)."""
+    lines = [f'name = "{spec.name}"', "[base]"]
+    lines += [f"{k} = {v!r}" for k, v in spec.base.items()]
+    lines += ["[sweep]"] + [f"{k} = {v!r}" for k, v in spec.sweep.items()]
+    for group in spec.zips:
+        lines += ["[[zip]]"] + [f"{k} = {v!r}" for k, v in group.items()]
+    path = folder / f"{spec.name}.toml"
+    path.write_text("\n".join(lines).replace("'", '"') + "\n")
+    assert load_spec(path).run_ids == spec.run_ids
+    return path
+
+
+# ---- same results however the runs are executed ---------------------------------
+def test_jobs_2_and_dask_match_jobs_1_bitwise(serial_run, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    results, _ = serial_run
+    ref_summary, ref_curves = load_tables("smoke", results_dir=results)
+
+    pool_root = run_campaign(SMOKE, jobs=2, quiet=True, results_dir=tmp_path / "pool")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, protocol="tcp",
+                                  dashboard_address=None) as cluster:
+        dask_root = run_campaign(SMOKE, scheduler=cluster.scheduler_address, quiet=True,
+                                 results_dir=tmp_path / "dask")
+    for root in (pool_root, dask_root):
+        summary, curves = load_tables(root)
+        assert_bitwise_equal(result_view(summary), result_view(ref_summary))
+        assert_bitwise_equal(curves, ref_curves)
+    # and they really ran with different thread counts (2 cores: 2 threads serial, 1 in the pool)
+    pool_threads = set(load_tables(pool_root)[0]["prov_numba_threads"])
+    assert set(ref_summary["prov_numba_threads"]) != pool_threads or os.cpu_count() == 1
+
+
+def test_result_does_not_depend_on_thread_count():
+    """A grid with more springs than one reduction block (4096), on 1 and 2 Numba threads."""
+    import numba
+
+    from tfm.simulate import simulate
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs 2 Numba threads")
+    p = Params.from_dict(dict(spacing="1/128", shape="paraboloid", k_th=0.02, radius=1.0,
+                              max_indent=0.05, step=0.01))
+    outs = []
+    before = numba.get_num_threads()
+    try:
+        for n in (1, 2):
+            numba.set_num_threads(n)
+            outs.append(simulate(p))
+    finally:
+        numba.set_num_threads(before)
+    a, b = outs
+    assert a.summary["n_springs"] > 4096
+    assert_bitwise_equal(a.curve, b.curve)
+    assert {k: v for k, v in a.summary.items() if k != "wall_time"} == \
+           {k: v for k, v in b.summary.items() if k != "wall_time"}
+
+
+# ---- crash and resume ------------------------------------------------------------
+def test_sigkill_then_resume_gives_the_uninterrupted_result(serial_run, tmp_path):
+    results, _ = serial_run
+    ref_summary, ref_curves = load_tables("smoke", results_dir=results)
+    spec = load_spec(SMOKE)
+    store = CampaignStore(tmp_path / "smoke")
+    env = {**os.environ, "CI": "true"}
+    proc = subprocess.Popen([sys.executable, "-m", "tfm.cli", "campaign", "run", str(SMOKE),
+                             "--results-dir", str(tmp_path), "--quiet"],
+                            cwd=REPO, env=env, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    try:
+        while not any(store.runs_dir.glob("*.parquet")):
+            assert proc.poll() is None, f"campaign exited early: {proc.stderr.read().decode()}"
+            assert time.monotonic() < deadline, "no run finished within 2 minutes"
+            time.sleep(0.005)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    _wait_until_group_is_gone(proc.pid)
+
+    finished = sorted(store.runs_dir.glob("*.parquet"))
+    assert 1 <= len(finished) < N_SMOKE, "the campaign was not interrupted in the middle"
+    assert not store.table_path("summary").exists()                   # killed before the tables
+    for path in finished:                                              # every visible run is whole
+        assert read_metadata(path)["run_id"] == path.stem
+        assert pq.read_table(path).num_rows == read_metadata(path)["summary"]["n_steps"]
+    st = store.status(spec)
+    assert len(st.done) == len(finished) and len(st.pending) == N_SMOKE - len(finished)
+
+    # a half-written file, as a kill during a write would leave it
+    partial = store.runs_dir / f".{spec.run_ids[-1]}.parquet.12345.tmp"
+    partial.write_bytes(b"PAR1 truncated")
+    run_campaign(SMOKE, quiet=True, results_dir=tmp_path)
+    assert not partial.exists()
+    assert not list(store.root.rglob("*.tmp"))
+    assert sorted(p.stem for p in store.runs_dir.glob("*.parquet")) == sorted(spec.run_ids)
+    summary, curves = load_tables(store.root)
+    assert summary["run_id"].tolist() == spec.run_ids                  # each run exactly once
+    assert_bitwise_equal(result_view(summary), result_view(ref_summary))
+    assert_bitwise_equal(curves, ref_curves)
+
+
+def _wait_until_group_is_gone(pgid: int, timeout: float = 30.0) -> None:
+    """Children of the killed runner (e.g. a `git` it started) may take a moment to exit."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return
+        time.sleep(0.01)
+    raise AssertionError(f"process group {pgid} still alive {timeout} s after SIGKILL")
+
+
+def test_a_second_runner_is_refused_while_one_holds_the_lock(tmp_path):
+    store = CampaignStore(tmp_path / "smoke")
+    with store.lock():
+        with pytest.raises(CampaignError, match=f"pid {os.getpid()} .* is running this campaign"):
+            with CampaignStore(store.root).lock(wait=0.1):
+                pass
+    with store.lock(wait=0.1):                  # released on exit
+        pass
+
+
+def test_load_tables_accepts_name_folder_or_file(serial_run):
+    results, root = serial_run
+    by_name = load_tables("smoke", results_dir=results)[0]
+    for other in (root, SMOKE):
+        assert load_tables(other, results_dir=results)[0]["run_id"].tolist() == by_name["run_id"].tolist()
+    with pytest.raises(FileNotFoundError, match="run the campaign first"):
+        load_tables("no-such-campaign", results_dir=results)

@@ -1,0 +1,117 @@
+"""`tfm campaign run|status|list|expand`: the command line of campaigns."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from .spec import CampaignError, load_spec
+
+
+def register(subparsers) -> None:
+    camp = subparsers.add_parser(
+        "campaign", help="grids of runs from a TOML file (run, status, list, expand)",
+        description="Campaigns: a TOML file in campaigns/ sweeps parameters; the runs go to "
+                    "results/<name>/ as summary.parquet, curves.parquet and failures.parquet.")
+    sub = camp.add_subparsers(dest="campaign_command", required=True)
+
+    run = sub.add_parser("run", help="run the runs not yet stored (resumes after a crash)",
+                         description="Run a campaign. Finished runs are skipped, failed and "
+                                     "unfinished ones are (re)done. Exit status 1 if a run failed.")
+    run.add_argument("file", help="campaign file, e.g. campaigns/smoke.toml")
+    run.add_argument("-j", "--jobs", type=int, default=1,
+                     help="local worker processes; the cores are divided among them (default 1)")
+    run.add_argument("--scheduler", metavar="ADDR", default=None,
+                     help="run on a Dask distributed cluster, e.g. tcp://host:8786")
+    run.add_argument("-q", "--quiet", action="store_true",
+                     help="no progress bar or messages (the bar is also off when CI=true)")
+    run.add_argument("--results-dir", default="results", help="parent of results/<name>/ (default results)")
+    run.add_argument("--skip-failed", action="store_true",
+                     help="do not retry runs that failed before")
+    run.set_defaults(func=cmd_run)
+
+    status = sub.add_parser("status", help="how many runs are done, pending and failed")
+    status.add_argument("file")
+    status.add_argument("--results-dir", default="results")
+    status.add_argument("-v", "--verbose", action="store_true", help="one line per run")
+    status.set_defaults(func=cmd_status)
+
+    lst = sub.add_parser("list", help="the campaign files and their progress")
+    lst.add_argument("--dir", default="campaigns", help="folder of campaign files (default campaigns)")
+    lst.add_argument("--results-dir", default="results")
+    lst.set_defaults(func=cmd_list)
+
+    expand = sub.add_parser("expand", help="print the runs a campaign file expands to")
+    expand.add_argument("file")
+    expand.add_argument("--json", action="store_true", help="one JSON object per run, all parameters")
+    expand.set_defaults(func=cmd_expand)
+
+
+def cmd_run(args) -> int:
+    from .runner import run_campaign
+    from .store import CampaignStore
+
+    spec = load_spec(args.file)
+    root = run_campaign(spec, jobs=args.jobs, scheduler=args.scheduler, quiet=args.quiet,
+                        results_dir=args.results_dir, retry_failed=not args.skip_failed)
+    status = CampaignStore(root).status(spec)
+    if status.flagged and not args.quiet:
+        print(f"{len(status.flagged)} runs are flagged (see the r_warnings column of "
+              f"{root / 'summary.parquet'})", file=sys.stderr)
+    if status.failed:
+        print(f"{len(status.failed)} runs failed; tracebacks in {root / 'failures.parquet'}",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def cmd_status(args) -> int:
+    from .store import CampaignStore
+
+    spec = load_spec(args.file)
+    store = CampaignStore.for_spec(spec, args.results_dir)
+    st = store.status(spec)
+    print(f"{spec.name}: {st.total} runs: {len(st.done)} done ({len(st.flagged)} flagged), "
+          f"{len(st.pending)} pending, {len(st.failed)} failed  [{store.root}]")
+    state = {**{r: "pending" for r in st.pending}, **{r: "done" for r in st.done},
+             **{r: "flagged" for r in st.flagged}, **{r: "failed" for r in st.failed}}
+    for run in spec.runs:
+        rid = run.run_id
+        if args.verbose or state[rid] == "failed":
+            line = f"  {run.index:4d} {rid} {state[rid]:8s} {_swept(run)}"
+            if state[rid] == "failed":
+                line += f"  {(store.read_failure(rid) or {}).get('error', '')}"
+            print(line)
+    return 0
+
+
+def cmd_list(args) -> int:
+    from .store import CampaignStore
+
+    files = sorted(Path(args.dir).glob("*.toml"))
+    if not files:
+        print(f"no campaign files in {args.dir}/", file=sys.stderr)
+    for path in files:
+        try:
+            spec = load_spec(path)
+        except CampaignError as exc:
+            print(f"{path.stem:20s} INVALID: {exc}")
+            continue
+        st = CampaignStore.for_spec(spec, args.results_dir).status(spec)
+        print(f"{path.stem:20s} {st.total:4d} runs {len(st.done):4d} done {len(st.failed):3d} failed"
+              f"  {spec.description}")
+    return 0
+
+
+def cmd_expand(args) -> int:
+    spec = load_spec(args.file)
+    for run in spec.runs:
+        if args.json:
+            print(json.dumps({"index": run.index, "run_id": run.run_id, **run.params.to_dict()}))
+        else:
+            print(f"{run.index:4d} {run.run_id} {_swept(run)}")
+    return 0
+
+
+def _swept(run) -> str:
+    return " ".join(f"{k}={v}" for k, v in run.swept.items())

@@ -1,0 +1,223 @@
+"""Run a campaign: in this process, over a local process pool, or on a Dask cluster.
+
+Each worker gets ``max(1, cores // workers)`` Numba threads (and as many scipy.fft
+workers, through NUMBA_NUM_THREADS, see ``tfm.config.fft_workers``), so two jobs on a
+two-core machine run one thread each. Results do not depend on the thread count: the
+engine's reductions use fixed blocks (``tfm.config.REDUCTION_BLOCK``).
+
+Workers only compute; this process writes every file (``CampaignStore``), so a Dask
+cluster needs no shared file system, and a run is either fully stored or not at all.
+A run that raises is recorded as a failure (parameters and traceback) and the others go on.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import traceback
+import warnings
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+from .spec import CampaignError, CampaignSpec, Run, load_spec
+from .store import CampaignStore
+
+
+@dataclass
+class Outcome:
+    """What a worker sends back: a RunResult, or the error and its traceback."""
+
+    result: Any = None
+    error: str = ""
+    traceback: str = ""
+
+
+def available_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def threads_per_worker(workers: int, cores: int | None = None) -> int:
+    return max(1, (cores or available_cores()) // max(1, workers))
+
+
+def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = False,
+                 results_dir: str | os.PathLike = "results", retry_failed: bool = True) -> Path:
+    """Run every run of a campaign that is not stored yet; return ``results_dir/<name>``.
+
+    ``jobs`` > 1 uses a local process pool; ``scheduler`` (an address such as
+    ``tcp://host:8786``, or a ``distributed.Client``) runs on a Dask cluster instead.
+    Finished runs are skipped, so calling it again after a crash resumes the campaign.
+    Failed runs are tried again unless ``retry_failed=False``.
+    """
+    spec = spec_or_path if isinstance(spec_or_path, CampaignSpec) else load_spec(spec_or_path)
+    if not isinstance(jobs, int) or jobs < 1:
+        raise CampaignError(f"jobs: must be a whole number >= 1, got {jobs!r}")
+    store = CampaignStore.for_spec(spec, results_dir)
+    with store.lock():
+        store.clean_temporary()
+        status = store.status(spec)
+        redo = set(status.pending) | (set(status.failed) if retry_failed else set())
+        todo = [run for run in spec.runs if run.run_id in redo]
+        if todo:
+            if scheduler is not None:
+                outcomes = _run_dask(todo, scheduler)
+            elif jobs > 1 and len(todo) > 1:
+                outcomes = _run_pool(todo, jobs)
+            else:
+                outcomes = _run_serial(todo)
+            _consume(spec, store, todo, outcomes, skipped=len(status.done), quiet=quiet)
+        store.write_tables(spec)
+    return store.root
+
+
+def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped: int, quiet: bool) -> None:
+    bar = _progress(spec.name, len(todo), quiet)
+    failed = 0
+    try:
+        for run, outcome in outcomes:
+            if outcome.result is not None:
+                store.write_run(run, outcome.result)
+            else:
+                failed += 1
+                store.write_failure(run, outcome.error, outcome.traceback)
+                if not quiet:
+                    bar.write(f"run {run.index} {run.run_id} failed: {outcome.error}", file=sys.stderr)
+            bar.update(1)
+            bar.set_postfix(failed=failed, refresh=False)
+    finally:
+        outcomes.close()
+        bar.close()
+    if not quiet:
+        print(f"campaign {spec.name}: {len(todo) - failed} runs done, {failed} failed, "
+              f"{skipped} already done -> {store.root}", file=sys.stderr)
+
+
+def _progress(name: str, total: int, quiet: bool):
+    from tqdm.auto import tqdm
+
+    in_ci = os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
+    return tqdm(total=total, desc=f"campaign {name}", unit="run", file=sys.stderr,
+                disable=quiet or in_ci, dynamic_ncols=True)
+
+
+# ---- the work of one run (runs in a worker) ----------------------------------
+def execute(params, executor: str = "serial") -> Outcome:
+    """Simulate one run; never raises, so one bad run cannot stop the campaign."""
+    try:
+        import numba
+
+        from ..config import fft_workers
+        from ..simulate import RunWarning, simulate
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RunWarning)   # the flags are in the summary
+            result = simulate(params)
+        result.provenance.update(numba_threads=numba.get_num_threads(), fft_workers=fft_workers(),
+                                 executor=executor)
+        return Outcome(result=result)
+    except Exception as exc:
+        return Outcome(error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc())
+
+
+def _set_threads(threads: int, set_env: bool = True) -> None:
+    """Numba threads of the calling thread (clamped to the pool numba started with), and,
+    for a worker process of our own, NUMBA_NUM_THREADS for scipy.fft."""
+    if set_env:
+        os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    import numba
+
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+
+
+def _failure(exc: BaseException) -> Outcome:
+    trace = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+    return Outcome(error=f"{type(exc).__name__}: {exc} (the worker did not return)", traceback=trace)
+
+
+# ---- executors: each yields (run, outcome) as runs finish --------------------
+def _run_serial(todo: list[Run]) -> Iterator[tuple[Run, Outcome]]:
+    for run in todo:
+        yield run, execute(run.params, "serial")
+
+
+def _pool_init(threads: int) -> None:
+    _set_threads(threads)
+
+
+def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
+    import multiprocessing
+
+    workers = min(jobs, len(todo))
+    threads = threads_per_worker(workers)
+    # spawn: a fresh interpreter per worker, safe with Numba's threads (fork is not).
+    # The workers start during the submits below, with NUMBA_NUM_THREADS already set,
+    # so Numba starts only `threads` threads in each; the initializer sets it again.
+    ctx = multiprocessing.get_context("spawn")
+    saved = os.environ.get("NUMBA_NUM_THREADS")
+    os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_pool_init,
+                               initargs=(threads,))
+    try:
+        futures = {pool.submit(execute, run.params, f"pool[{workers}x{threads}]"): run for run in todo}
+    finally:
+        if saved is None:
+            os.environ.pop("NUMBA_NUM_THREADS", None)
+        else:
+            os.environ["NUMBA_NUM_THREADS"] = saved
+    try:
+        for fut in as_completed(futures):
+            try:
+                outcome = fut.result()
+            except Exception as exc:          # the worker died (e.g. out of memory)
+                outcome = _failure(exc)
+            yield futures[fut], outcome
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _execute_dask(params, host_threads: dict[str, int], client_pid: int) -> Outcome:
+    """The Dask task: share the host's cores among the worker threads on that host."""
+    from distributed import get_worker
+    from distributed.comm import get_address_host
+
+    worker = get_worker()
+    state = getattr(worker, "state", worker)
+    host = get_address_host(worker.address)
+    threads = threads_per_worker(host_threads.get(host, state.nthreads))
+    # the environment is per process: set it only in a worker process of its own, not
+    # in a client that runs its workers in-process (LocalCluster(processes=False))
+    _set_threads(threads, set_env=os.getpid() != client_pid)
+    return execute(params, f"dask[{threads} threads]")
+
+
+def _run_dask(todo: list[Run], scheduler) -> Iterator[tuple[Run, Outcome]]:
+    try:
+        from distributed import Client, as_completed as dask_completed
+        from distributed.comm import get_address_host
+    except ImportError:
+        raise CampaignError("--scheduler needs dask.distributed: pip install 'tfm[dask]'") from None
+    own = not hasattr(scheduler, "submit")
+    client = Client(scheduler) if own else scheduler
+    try:
+        host_threads: dict[str, int] = {}
+        for addr, info in client.scheduler_info().get("workers", {}).items():
+            host = info.get("host") or get_address_host(addr)
+            host_threads[host] = host_threads.get(host, 0) + int(info.get("nthreads", 1))
+        futures = {client.submit(_execute_dask, run.params, host_threads, os.getpid(), pure=False): run
+                   for run in todo}
+        try:
+            for fut in dask_completed(list(futures)):
+                try:
+                    outcome = fut.result()
+                except Exception as exc:      # the worker died or the task was lost
+                    outcome = _failure(exc)
+                yield futures[fut], outcome
+        finally:
+            client.cancel([f for f in futures if not f.done()])
+    finally:
+        if own:
+            client.close()

@@ -1,0 +1,201 @@
+"""Campaign files (TOML) -> an ordered list of validated runs.
+
+A campaign file names a study, fixes base parameters and sweeps the others::
+
+    name = "smoke"                  # results go to results/smoke/
+    description = "what this study is for"
+    [base]                          # fixed for every run (any Params field)
+    spacing = "1/16"
+    [sweep]                         # cartesian product of these lists
+    alpha = [0.5, 0.75]
+    [[zip]]                         # lists of one [[zip]] table move together
+    radius = [0.5, 1.0]
+    max_indent = [0.025, 0.05]
+
+The runs are the product of the ``[sweep]`` axes (in file order) and the ``[[zip]]``
+groups (in file order); the last axis varies fastest. Every run is validated through
+``Params.from_dict`` before anything runs, so a typo or a bad value fails at once with
+the file, the parameter and the reason. Optional parameters (``k_th``, ``f_th``,
+``extent``, ``max_unload_steps``) take the string ``"none"`` for None, since TOML has
+no null.
+"""
+from __future__ import annotations
+
+import difflib
+import itertools
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from ..params import ParameterError, Params
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - python 3.10
+    import tomli as tomllib
+
+TOP_LEVEL_KEYS = ("name", "description", "base", "sweep", "zip")
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
+_NONE_WORDS = ("none", "null")
+
+
+class CampaignError(ParameterError):
+    """A campaign file is missing, malformed, or expands to an invalid run."""
+
+
+@dataclass(frozen=True)
+class Run:
+    """One expanded run: its position in the campaign, its swept values and its record."""
+
+    index: int
+    params: Params
+    swept: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def run_id(self) -> str:
+        return self.params.run_id
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    """A parsed, fully validated campaign: every run already built as a ``Params``."""
+
+    name: str
+    description: str
+    base: dict[str, Any]
+    sweep: dict[str, list]
+    zips: tuple[dict[str, list], ...]
+    runs: tuple[Run, ...]
+    source: str = "<dict>"
+
+    @property
+    def run_ids(self) -> list[str]:
+        return [r.run_id for r in self.runs]
+
+    @property
+    def swept_names(self) -> list[str]:
+        return list(self.sweep) + [k for group in self.zips for k in group]
+
+
+def load_spec(path: str | Path) -> CampaignSpec:
+    """Read and validate a campaign file; raises CampaignError naming the file."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise CampaignError(f"{path}: no such campaign file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise CampaignError(f"{path}: not valid TOML: {exc}") from None
+    return spec_from_dict(data, source=str(path))
+
+
+def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> CampaignSpec:
+    """Validate a campaign given as a mapping (the parsed TOML) and expand its runs."""
+    where = source
+    for key in data:
+        if key not in TOP_LEVEL_KEYS:
+            raise CampaignError(f"{where}: unknown top-level key {key!r}{_hint(key, TOP_LEVEL_KEYS)}; "
+                                f"allowed: {', '.join(TOP_LEVEL_KEYS)}")
+    name = data.get("name")
+    if not isinstance(name, str) or not NAME_PATTERN.match(name):
+        raise CampaignError(f"{where}: name: expected a folder-safe name (letters, digits, '.', '_', '-'; "
+                            f"starting with a letter or digit), got {name!r}")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise CampaignError(f"{where}: description: expected a string, got {description!r}")
+
+    base = _table(data.get("base", {}), "[base]", where)
+    sweep = {k: _axis(v, f"[sweep] {k}", where) for k, v in _table(data.get("sweep", {}), "[sweep]", where).items()}
+    raw_zips = data.get("zip", [])
+    if isinstance(raw_zips, Mapping):          # a single [zip] table
+        raw_zips = [raw_zips]
+    if not isinstance(raw_zips, list):
+        raise CampaignError(f"{where}: zip: expected [[zip]] tables, got {raw_zips!r}")
+    zips = []
+    for g, group in enumerate(raw_zips):
+        label = f"[[zip]] #{g + 1}"
+        group = {k: _axis(v, f"{label} {k}", where) for k, v in _table(group, label, where).items()}
+        if not group:
+            raise CampaignError(f"{where}: {label}: empty; list at least one parameter")
+        lengths = {k: len(v) for k, v in group.items()}
+        if len(set(lengths.values())) > 1:
+            detail = ", ".join(f"{k} has {n}" for k, n in lengths.items())
+            raise CampaignError(f"{where}: {label}: zipped lists must have the same length ({detail})")
+        zips.append(group)
+
+    # each parameter is set in one place only
+    seen: dict[str, str] = {}
+    sections = [("[base]", base)] + [("[sweep]", sweep)] + [(f"[[zip]] #{g + 1}", z) for g, z in enumerate(zips)]
+    names = Params.field_names()
+    for section, table in sections:
+        for key in table:
+            if key not in names:
+                hint = _hint(key, names)
+                top = difflib.get_close_matches(key, TOP_LEVEL_KEYS, n=1)
+                if top and not hint:
+                    hint = (f" (a top-level key such as {top[0]!r} must come before the first "
+                            "[table] of the file)")
+                raise CampaignError(f"{where}: {section}: unknown parameter {key!r}{hint}")
+            if key in seen:
+                raise CampaignError(f"{where}: parameter {key!r} is set in both {seen[key]} and {section}; "
+                                    "set it in one place")
+            seen[key] = section
+
+    runs = tuple(_expand(base, sweep, zips, where))
+    by_id: dict[str, Run] = {}
+    for run in runs:
+        if run.run_id in by_id:
+            first = by_id[run.run_id]
+            raise CampaignError(f"{where}: run {run.index} {_label(run.swept)} is the same run as run "
+                                f"{first.index} {_label(first.swept)} (equal parameters); "
+                                "remove the duplicate value")
+        by_id[run.run_id] = run
+    return CampaignSpec(name=name, description=description, base=dict(base), sweep=sweep,
+                        zips=tuple(zips), runs=runs, source=source)
+
+
+def _expand(base, sweep, zips, where):
+    axes = [[{k: v} for v in values] for k, values in sweep.items()]
+    axes += [[dict(zip(group, values)) for values in zip(*group.values())] for group in zips]
+    for index, combo in enumerate(itertools.product(*axes)):
+        swept: dict[str, Any] = {}
+        for part in combo:
+            swept.update(part)
+        values = {**base, **swept}
+        values = {k: (None if isinstance(v, str) and v.strip().lower() in _NONE_WORDS else v)
+                  for k, v in values.items()}
+        try:
+            params = Params.from_dict(values, where=f"{where}: run {index} {_label(swept)}".rstrip())
+        except ParameterError as exc:
+            raise CampaignError(str(exc)) from None
+        yield Run(index=index, params=params, swept=swept)
+
+
+def _table(value: Any, label: str, where: str) -> dict[str, Any]:
+    if not isinstance(value, Mapping):
+        raise CampaignError(f"{where}: {label}: expected a table of parameter = value, got {value!r}")
+    return dict(value)
+
+
+def _axis(value: Any, label: str, where: str) -> list:
+    if not isinstance(value, list):
+        raise CampaignError(f"{where}: {label}: a swept parameter needs a list of values, got {value!r} "
+                            "(fix it in [base] instead)")
+    if not value:
+        raise CampaignError(f"{where}: {label}: empty list; give at least one value")
+    for v in value:
+        if isinstance(v, (list, dict)):
+            raise CampaignError(f"{where}: {label}: values must be numbers or strings, got {v!r}")
+    return list(value)
+
+
+def _hint(key: str, names) -> str:
+    close = difflib.get_close_matches(key, names, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _label(swept: Mapping[str, Any]) -> str:
+    return "(" + ", ".join(f"{k}={v!r}" for k, v in swept.items()) + ")" if swept else ""

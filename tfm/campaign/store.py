@@ -1,0 +1,277 @@
+"""Where a campaign's results live, and how they are written so that a kill never corrupts them.
+
+Layout under ``<results_dir>/<campaign name>/``::
+
+    runs/<run_id>.parquet      one finished run: its curve, with params, summary and
+                               provenance in the Parquet metadata (tfm.results.write_table)
+    failures/<run_id>.json     one failed run: parameters, error and traceback
+    summary.parquet            one row per finished run: run_id, status, p_*, r_*, prov_*
+    curves.parquet             every step of every finished run, with run_id
+    failures.parquet           one row per failed run: run_id, p_*, error, traceback
+    .lock                      held (flock) while a `tfm campaign run` works here
+
+Every file is written to a temporary name in the same folder and renamed into place,
+so a reader sees either the old file or the new one. A run is done when its run file
+exists and its footer names the run id; leftover temporary files are removed when a
+campaign resumes. The campaign tables are rebuilt from the run files, in the campaign's
+expansion order, so they do not depend on which worker finished first.
+"""
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import datetime as _dt
+import json
+import os
+import platform
+import time
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+import pandas as pd
+import pyarrow.parquet as pq
+
+from ..params import Params
+from ..results import read_metadata, write_table
+from .spec import CampaignError, CampaignSpec, Run
+
+TABLES = ("summary", "curves", "failures")
+PARAM_PREFIX, RESULT_PREFIX, PROV_PREFIX = "p_", "r_", "prov_"
+
+
+@dataclasses.dataclass(frozen=True)
+class Status:
+    """Run ids of a campaign by state, in expansion order."""
+
+    done: list[str]
+    failed: list[str]
+    pending: list[str]
+    flagged: list[str]          # done, but the run raised a warning flag
+
+    @property
+    def total(self) -> int:
+        return len(self.done) + len(self.failed) + len(self.pending)
+
+
+class CampaignStore:
+    """The files of one campaign under ``root`` (``results/<name>``)."""
+
+    def __init__(self, root: str | os.PathLike):
+        self.root = Path(root)
+        self.runs_dir = self.root / "runs"
+        self.failures_dir = self.root / "failures"
+
+    @classmethod
+    def for_spec(cls, spec: CampaignSpec, results_dir: str | os.PathLike = "results") -> "CampaignStore":
+        return cls(Path(results_dir) / spec.name)
+
+    def run_path(self, run_id: str) -> Path:
+        return self.runs_dir / f"{run_id}.parquet"
+
+    def failure_path(self, run_id: str) -> Path:
+        return self.failures_dir / f"{run_id}.json"
+
+    def table_path(self, table: str) -> Path:
+        return self.root / f"{table}.parquet"
+
+    # ---- exclusive access and crash recovery -------------------------------
+    @contextlib.contextmanager
+    def lock(self, wait: float = 5.0) -> Iterator[None]:
+        """Hold the campaign's lock; a second runner on the same campaign fails after
+        ``wait`` seconds. The kernel drops the lock when the holder dies, even by SIGKILL
+        (the short wait covers a killed runner's children that are still exiting)."""
+        import fcntl
+
+        self.root.mkdir(parents=True, exist_ok=True)
+        with open(self.root / ".lock", "a+") as fh:
+            deadline = time.monotonic() + wait
+            while True:
+                try:
+                    fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if time.monotonic() > deadline:
+                        fh.seek(0)
+                        holder = fh.read().strip() or "another process"
+                        raise CampaignError(f"{self.root}: {holder} is running this campaign; "
+                                            "wait for it or stop it") from None
+                    time.sleep(0.05)
+            fh.seek(0)
+            fh.truncate()
+            fh.write(f"pid {os.getpid()} on {platform.node()}")
+            fh.flush()
+            try:
+                yield
+            finally:
+                fh.truncate(0)
+                fcntl.flock(fh, fcntl.LOCK_UN)
+
+    def clean_temporary(self) -> list[Path]:
+        """Remove temporary files left by a killed writer (call with the lock held)."""
+        removed = []
+        for folder in (self.root, self.runs_dir, self.failures_dir):
+            for tmp in folder.glob(".*.tmp"):
+                tmp.unlink(missing_ok=True)
+                removed.append(tmp)
+        return removed
+
+    # ---- per-run records ---------------------------------------------------
+    def run_metadata(self, run_id: str) -> dict[str, Any] | None:
+        """The metadata of a finished run: None unless the run file exists, has a readable
+        footer, and is the run it is named after."""
+        path = self.run_path(run_id)
+        if not path.exists():
+            return None
+        try:
+            meta = read_metadata(path)
+        except (OSError, ValueError):        # pyarrow raises ArrowInvalid (a ValueError)
+            return None
+        return meta if meta.get("run_id") == run_id else None
+
+    def write_run(self, run: Run, result) -> Path:
+        """Store a finished run (a tfm.results.RunResult) atomically; clear its failure."""
+        path = result.write_curve(self.run_path(run.run_id))
+        self.failure_path(run.run_id).unlink(missing_ok=True)
+        return path
+
+    def write_failure(self, run: Run, error: str, trace: str) -> Path:
+        record = {"run_id": run.run_id, "params": run.params.to_dict(), "error": error,
+                  "traceback": trace, "host": platform.node(),
+                  "failed_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+        path = self.failure_path(run.run_id)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(record, indent=1, sort_keys=True))
+        os.replace(tmp, path)
+        return path
+
+    def read_failure(self, run_id: str) -> dict[str, Any] | None:
+        try:
+            return json.loads(self.failure_path(run_id).read_text())
+        except (OSError, ValueError):
+            return None
+
+    def status(self, spec: CampaignSpec) -> Status:
+        done, failed, pending, flagged = [], [], [], []
+        for run in spec.runs:
+            rid = run.run_id
+            meta = self.run_metadata(rid)
+            if meta is not None:
+                done.append(rid)
+                if meta.get("summary", {}).get("warnings"):
+                    flagged.append(rid)
+            elif self.failure_path(rid).exists():
+                failed.append(rid)
+            else:
+                pending.append(rid)
+        return Status(done, failed, pending, flagged)
+
+    # ---- campaign tables ---------------------------------------------------
+    def write_tables(self, spec: CampaignSpec, status: Status | None = None) -> bool:
+        """Assemble summary, curves and failures from the run files; False if already current."""
+        status = status or self.status(spec)
+        record = {"name": spec.name, "description": spec.description, "run_ids": status.done,
+                  "failed": status.failed}
+        if self._tables_current(record):
+            return False
+        by_id = {r.run_id: r for r in spec.runs}
+        rows, curves = [], []
+        for rid in status.done:
+            path = self.run_path(rid)
+            meta = read_metadata(path)
+            summary = meta["summary"]
+            rows.append({"run_id": rid, "status": "flagged" if summary.get("warnings") else "ok",
+                         **param_columns(by_id[rid].params),
+                         **{RESULT_PREFIX + k: v for k, v in summary.items()},
+                         **{PROV_PREFIX + k: v for k, v in meta.get("provenance", {}).items()}})
+            curve = pq.read_table(path).to_pandas()
+            curve.insert(0, "run_id", rid)
+            curves.append(curve)
+        fails = []
+        for rid in status.failed:
+            rec = self.read_failure(rid) or {}
+            fails.append({"run_id": rid, **param_columns(by_id[rid].params),
+                          "error": rec.get("error", ""), "traceback": rec.get("traceback", ""),
+                          "host": rec.get("host", ""), "failed_at": rec.get("failed_at", "")})
+        extra = {"campaign": record}
+        summary_df = _typed_frame(rows, ["run_id", "status"] + param_names())
+        curves_df = (pd.concat(curves, ignore_index=True) if curves
+                     else pd.DataFrame({"run_id": pd.Series([], dtype=object)}))
+        fail_cols = ["run_id"] + param_names() + ["error", "traceback", "host", "failed_at"]
+        failures_df = _typed_frame(fails, fail_cols)
+        # the summary last: its metadata is what says the tables are current
+        write_table(curves_df, self.table_path("curves"), extra=extra)
+        write_table(failures_df, self.table_path("failures"), extra=extra)
+        write_table(summary_df, self.table_path("summary"), extra=extra)
+        return True
+
+    def _tables_current(self, record: dict[str, Any]) -> bool:
+        try:
+            return all(read_metadata(self.table_path(t)).get("campaign") == record for t in TABLES)
+        except (OSError, ValueError):
+            return False
+
+    def load(self, table: str) -> pd.DataFrame:
+        path = self.table_path(table)
+        if not path.exists():
+            raise FileNotFoundError(f"{path}: no such table; run the campaign first "
+                                    "(tfm campaign run FILE)")
+        return pd.read_parquet(path)
+
+
+# ---- parameter columns with stable types ------------------------------------
+def param_names() -> list[str]:
+    return [PARAM_PREFIX + n for n in Params.field_names()]
+
+
+def _param_kinds() -> dict[str, str]:
+    """float, int or str per parameter, from the record's annotations. A field that may
+    hold a string (max_indent: a number or "auto") is stored as a string column."""
+    kinds = {}
+    for f in dataclasses.fields(Params):
+        t = str(f.type)
+        kinds[f.name] = "str" if "str" in t else "float" if "float" in t else "int" if "int" in t else "str"
+    return kinds
+
+
+def param_columns(params: Params) -> dict[str, Any]:
+    kinds = _param_kinds()
+    out = {}
+    for name, value in params.to_dict().items():
+        if value is not None and kinds[name] == "str":
+            value = str(value)
+        out[PARAM_PREFIX + name] = value
+    return out
+
+
+def _typed_frame(rows: list[dict[str, Any]], leading: Iterable[str]) -> pd.DataFrame:
+    """A frame whose column types do not depend on the values: parameters typed from the
+    record, ints that may be None as nullable Int64, strings as object."""
+    leading = list(leading)
+    columns = leading + [c for row in rows for c in row if c not in leading]
+    columns = list(dict.fromkeys(columns))
+    kinds = {PARAM_PREFIX + k: v for k, v in _param_kinds().items()}
+    data = {}
+    for col in columns:
+        values = [row.get(col) for row in rows]
+        kind = kinds.get(col) or _infer_kind(values)
+        if kind == "float":
+            data[col] = pd.Series([float("nan") if v is None else v for v in values], dtype="float64")
+        elif kind == "int":
+            data[col] = pd.Series(values, dtype="Int64" if None in values or not values else "int64")
+        elif kind == "bool":
+            data[col] = pd.Series(values, dtype="boolean" if None in values else "bool")
+        else:
+            data[col] = pd.Series(values, dtype=object)
+    return pd.DataFrame(data, columns=columns)
+
+
+def _infer_kind(values: list[Any]) -> str:
+    present = [v for v in values if v is not None]
+    if present and all(isinstance(v, bool) for v in present):
+        return "bool"
+    if present and all(isinstance(v, int) and not isinstance(v, bool) for v in present):
+        return "int"
+    if present and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in present):
+        return "float"
+    return "str"
