@@ -176,6 +176,26 @@ def test_rerun_does_no_work(serial_run, monkeypatch):
     assert {p: p.stat().st_mtime_ns for p in root.rglob("*.parquet")} == before
 
 
+def test_runs_from_other_code_are_reported_stale_and_can_be_rerun(tmp_path, monkeypatch, capsys):
+    """The run id hashes parameters, not code: resume must say when stored runs came from
+    another commit, and --rerun-stale must recompute them."""
+    spec = spec_from_dict({"name": "stale", "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
+                                                     "max_indent": 0.02, "step": 2e-3},
+                           "sweep": {"alpha": [0.5, 0.75]}}, source="stale")
+    run_campaign(spec, quiet=True, results_dir=tmp_path)
+    store = CampaignStore.for_spec(spec, tmp_path)
+    assert store.status(spec).stale == []
+    monkeypatch.setattr("tfm.campaign.store.git_commit", lambda: "0" * 40)
+    assert len(store.status(spec).stale) == 2
+    calls = []
+    real = importlib.import_module("tfm.campaign.runner").execute
+    monkeypatch.setattr("tfm.campaign.runner.execute", lambda *a, **k: calls.append(1) or real(*a, **k))
+    run_campaign(spec, results_dir=tmp_path)
+    assert calls == [] and "computed by another tfm version or commit" in capsys.readouterr().err
+    run_campaign(spec, quiet=True, results_dir=tmp_path, rerun_stale=True)
+    assert len(calls) == 2
+
+
 @pytest.mark.parametrize("ci, quiet, bar, line", [("true", False, False, True), ("", False, True, True),
                                                  ("", True, False, False)])
 def test_progress_bar_is_quiet_with_quiet_and_in_ci(tmp_path, monkeypatch, capsys, ci, quiet, bar, line):

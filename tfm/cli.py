@@ -74,12 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-plot", action="store_true")
     run.add_argument("-q", "--quiet", action="store_true")
     run.set_defaults(func=cmd_run)
-    try:
-        from .campaign.cli import register
-    except ImportError:
-        register = None
-    if register is not None:
-        register(sub)
+    from .campaign.cli import register
+    register(sub)
     return parser
 
 

@@ -28,6 +28,8 @@ def register(subparsers) -> None:
     run.add_argument("--results-dir", default="results", help="parent of results/<name>/ (default results)")
     run.add_argument("--skip-failed", action="store_true",
                      help="do not retry runs that failed before")
+    run.add_argument("--rerun-stale", action="store_true",
+                     help="recompute runs stored by another tfm version or git commit")
     run.set_defaults(func=cmd_run)
 
     status = sub.add_parser("status", help="how many runs are done, pending and failed")
@@ -53,7 +55,8 @@ def cmd_run(args) -> int:
 
     spec = load_spec(args.file)
     root = run_campaign(spec, jobs=args.jobs, scheduler=args.scheduler, quiet=args.quiet,
-                        results_dir=args.results_dir, retry_failed=not args.skip_failed)
+                        results_dir=args.results_dir, retry_failed=not args.skip_failed,
+                        rerun_stale=args.rerun_stale)
     status = CampaignStore(root).status(spec)
     if status.flagged and not args.quiet:
         print(f"{len(status.flagged)} runs are flagged (see the r_warnings column of "
@@ -72,7 +75,9 @@ def cmd_status(args) -> int:
     store = CampaignStore.for_spec(spec, args.results_dir)
     st = store.status(spec)
     print(f"{spec.name}: {st.total} runs: {len(st.done)} done ({len(st.flagged)} flagged), "
-          f"{len(st.pending)} pending, {len(st.failed)} failed  [{store.root}]")
+          f"{len(st.pending)} pending, {len(st.failed)} failed"
+          + (f", {len(st.stale)} computed by other tfm code (--rerun-stale)" if st.stale else "")
+          + f"  [{store.root}]")
     state = {**{r: "pending" for r in st.pending}, **{r: "done" for r in st.done},
              **{r: "flagged" for r in st.flagged}, **{r: "failed" for r in st.failed}}
     for run in spec.runs:

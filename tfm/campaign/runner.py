@@ -45,13 +45,16 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
 
 
 def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = False,
-                 results_dir: str | os.PathLike = "results", retry_failed: bool = True) -> Path:
+                 results_dir: str | os.PathLike = "results", retry_failed: bool = True,
+                 rerun_stale: bool = False) -> Path:
     """Run every run of a campaign that is not stored yet; return ``results_dir/<name>``.
 
     ``jobs`` > 1 uses a local process pool; ``scheduler`` (an address such as
     ``tcp://host:8786``, or a ``distributed.Client``) runs on a Dask cluster instead.
     Finished runs are skipped, so calling it again after a crash resumes the campaign.
-    Failed runs are tried again unless ``retry_failed=False``.
+    Failed runs are tried again unless ``retry_failed=False``. Runs stored by another
+    tfm version or commit are kept (with a warning) unless ``rerun_stale=True``: the run id
+    hashes the parameters, not the code.
     """
     spec = spec_or_path if isinstance(spec_or_path, CampaignSpec) else load_spec(spec_or_path)
     if not isinstance(jobs, int) or jobs < 1:
@@ -61,6 +64,13 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
         store.clean_temporary()
         status = store.status(spec)
         redo = set(status.pending) | (set(status.failed) if retry_failed else set())
+        if status.stale:
+            if rerun_stale:
+                redo |= set(status.stale)
+            else:
+                print(f"warning: campaign {spec.name}: {len(status.stale)} stored runs were computed "
+                      "by another tfm version or commit (see prov_git_commit); they are kept. "
+                      "Use --rerun-stale to recompute them.", file=sys.stderr)
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo:
             if scheduler is not None:

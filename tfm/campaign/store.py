@@ -32,7 +32,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from ..params import Params
-from ..results import read_metadata, write_table
+from ..results import git_commit, read_metadata, tfm_version, write_table
 from .spec import CampaignError, CampaignSpec, Run
 
 TABLES = ("summary", "curves", "failures")
@@ -47,10 +47,18 @@ class Status:
     failed: list[str]
     pending: list[str]
     flagged: list[str]          # done, but the run raised a warning flag
+    stale: list[str] = dataclasses.field(default_factory=list)  # done by other tfm code
 
     @property
     def total(self) -> int:
         return len(self.done) + len(self.failed) + len(self.pending)
+
+
+def _code_identity(prov: dict[str, Any]) -> tuple:
+    """The code a run was computed with: tfm version and commit (a dirty tree counts as
+    its commit, since uncommitted edits cannot be identified anyway)."""
+    commit = (prov.get("git_commit") or "").removesuffix("-dirty") or None
+    return prov.get("tfm_version"), commit
 
 
 class CampaignStore:
@@ -152,7 +160,8 @@ class CampaignStore:
             return None
 
     def status(self, spec: CampaignSpec) -> Status:
-        done, failed, pending, flagged = [], [], [], []
+        done, failed, pending, flagged, stale = [], [], [], [], []
+        here = _code_identity({"tfm_version": tfm_version(), "git_commit": git_commit()})
         for run in spec.runs:
             rid = run.run_id
             meta = self.run_metadata(rid)
@@ -160,11 +169,13 @@ class CampaignStore:
                 done.append(rid)
                 if meta.get("summary", {}).get("warnings"):
                     flagged.append(rid)
+                if _code_identity(meta.get("provenance") or {}) != here:
+                    stale.append(rid)
             elif self.failure_path(rid).exists():
                 failed.append(rid)
             else:
                 pending.append(rid)
-        return Status(done, failed, pending, flagged)
+        return Status(done, failed, pending, flagged, stale)
 
     # ---- campaign tables ---------------------------------------------------
     def write_tables(self, spec: CampaignSpec, status: Status | None = None) -> bool:
