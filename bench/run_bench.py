@@ -111,12 +111,13 @@ def main(argv=None):
             print(f"| {sp} | {med:.2f} | {lo:.2f} | {hi:.2f} | {solves} | {iters} | {fmax:.7g} | {side} |")
         print()
     if args.only in (None, "tree"):
-        try:
-            from bench.bench_tree import main as tree_main
-        except ImportError:
-            print("(tree benchmark not available)")
-        else:
-            tree_main(quick=args.quick) if "quick" in tree_main.__code__.co_varnames else tree_main()
+        from bench.bench_tree import markdown, tree_table
+
+        sizes = (64, 128) if args.quick else (64, 128, 256, 512)
+        print("## Barnes-Hut tree against the direct sum (RMS and max relative error; median "
+              "seconds)\n")
+        print(markdown(tree_table(sizes=sizes, repeats=3 if args.quick else 5)))
+        print()
 
 
 if __name__ == "__main__":

@@ -238,7 +238,7 @@ def _validate(p: Params) -> None:
     _integer("neighbor_rings", p.neighbor_rings, 1, 64)
     _positive("c_w", p.c_w)
     _choice("operator", p.operator, OPERATORS)
-    _positive("theta", p.theta, upper=1.5)
+    _positive("theta", p.theta, upper=1.0)
     _choice("layout", p.layout, LAYOUTS)
     j = _finite("jitter", p.jitter)
     if not 0.0 <= j < 0.5:
