@@ -81,3 +81,22 @@ def auto_max_indent(p) -> float:
     # never shallower than a few steps, never as deep as the sphere itself
     delta = max(delta, 10.0 * p.step)
     return min(delta, 0.5 * p.radius)
+
+
+def jkr_curve(k_ic, radius, a):
+    """JKR force and indentation at contact radius ``a`` (paraboloid on a rigid flat).
+
+    Johnson, *Contact Mechanics* (1985), Sec. 5.5, with gamma = K_IC^2 / (2 E*):
+    P = 4 E* a^3 / (3 R) - sqrt(8 pi gamma E* a^3),  delta = a^2 / R - sqrt(2 pi gamma a / E*).
+    P is compressive-positive as in the paper's plots. Returns ``(delta, P)``."""
+    a = np.asarray(a, dtype=float)
+    gamma = gamma_from_k(k_ic)
+    force = 4.0 * E_STAR * a ** 3 / (3.0 * radius) - np.sqrt(8.0 * math.pi * gamma * E_STAR * a ** 3)
+    delta = a ** 2 / radius - np.sqrt(2.0 * math.pi * gamma * a / E_STAR)
+    return delta, force
+
+
+def preload_is_deep(k_ic, radius, max_indent) -> bool:
+    """Whether the Hertz radius at ``max_indent`` reaches the JKR critical radius
+    (shared/PHYSICS.md, "Loading depth matters")."""
+    return math.sqrt(radius * max_indent) >= jkr_critical_radius(k_ic, radius)
