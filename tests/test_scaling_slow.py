@@ -133,7 +133,9 @@ def test_convergent_alpha_per_kernel(kernels):
     # Boussinesq: 0.75. The coarse spacings (N = 7.7..49) bias every slope by about
     # +0.1, which moves the crossing by -0.1/4 = -0.025. Tolerance 0.06.
     assert found["boussinesq"].alpha == pytest.approx(0.75, abs=0.06)
-    # Local: exactly 1 in the continuum; the lattice error is O(spacing^2). Tolerance 0.03.
+    # Local: exactly 1 in the continuum; the first-order excess of the discrete maximum
+    # (test_local_kernel_converges_to_winkler_limit) adds +0.03..+0.07 to the slopes at
+    # 1/32-1/128, which moves the crossing by -0.01..-0.02. Tolerance 0.03.
     assert found["local"].alpha == pytest.approx(1.0, abs=0.03)
     # Neighbors (2 rings): compliance ~ 1/spacing, so 0.75 (see campaigns/paper_kernels.toml).
     assert found["neighbors"].alpha == pytest.approx(0.75, abs=0.1)
@@ -145,6 +147,12 @@ def test_convergent_alpha_per_kernel(kernels):
 def test_local_kernel_converges_to_winkler_limit(kernels):
     s = kernels[(kernels["p_kernel"] == "local") & (kernels["p_alpha"] == 1.0)].sort_values("p_spacing")
     exact = theory.winkler_pull_off(1.0, 0.02, 1.0)
-    finest = s["r_pull_off_force"].iloc[0]
-    # 1/128: the O(spacing^2) lattice excess is 1.6 % / 4 = 0.4 %. Tolerance 1 %.
-    assert finest == pytest.approx(exact, rel=0.01)
+    rho = math.sqrt(2.0 * 1.0 * 0.02)              # the tensile radius sqrt(2 R c_w sigma_th)
+    excess = (s["r_pull_off_force"].to_numpy() / exact - 1.0)     # finest first
+    h = s["p_spacing"].to_numpy()
+    # first-order excess of the discrete maximum (the outermost springs hold the threshold
+    # until they snap): 0 < excess < 0.6 spacing/rho (measured 0.4-0.56), i.e. < 2.3 % at
+    # 1/128, shrinking by at least 2x per halving of the spacing
+    assert np.all(excess > 0.0)
+    assert np.all(excess < 0.6 * h / rho)
+    assert np.all(excess[:-1] < excess[1:] / 2.0)

@@ -150,6 +150,7 @@ def plot_refinement(curves, radius, k_ic=None, path=None, title=None, zoom=True,
             ax1.plot(d_j, P_j, ":", lw=1.2, color=c)
             ax2.plot(P_j, a, ":", lw=1.2, color=c)
         ax1.plot([], [], "k:", label="JKR (dotted)")
+    ax1.plot([], [], "-", lw=0.6, color="0.5", label="loading (thin)")
     ax1.set_xlabel("indentation $\\delta = -d$")
     ax1.set_ylabel("force $P$ (compression > 0)")
     ax2.set_xlabel("force $P$ (compression > 0)")
@@ -161,6 +162,7 @@ def plot_refinement(curves, radius, k_ic=None, path=None, title=None, zoom=True,
     for ax in (ax1, ax2):
         ax.axhline(0, color="0.7", lw=0.5)
         ax.legend(frameon=False, fontsize=7)
+    ax2.ticklabel_format(axis="x", style="sci", scilimits=(-2, 2))
     ax1.set_title("(a) force vs indentation (tensile part)", fontsize=9)
     ax2.set_title("(b) contact radius vs force", fontsize=9)
     sp = np.array(sorted(fmax_by))
@@ -174,6 +176,9 @@ def plot_refinement(curves, radius, k_ic=None, path=None, title=None, zoom=True,
         mid = len(sp) // 2
         ax3.loglog(sp, fm[mid] * (sp / sp[mid]) ** predicted_slope, "--", color="tab:red", lw=0.8,
                    label=f"slope {predicted_slope:g} (4$\\alpha$ - 3)")
+    lo, hi = float(fm.min()), float(fm.max())
+    if hi / lo < 10:                      # show a near-constant series as near-constant
+        ax3.set_ylim(lo / 3.0, hi * 3.0)
     ax3.set_xlabel("spacing $\\Delta$")
     ax3.set_ylabel("$F_{max}$")
     ax3.set_title("(c) pull-off force against spacing", fontsize=9)
