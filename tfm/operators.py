@@ -86,11 +86,16 @@ def grid_symbol(spec: KernelSpec, layout: Layout) -> tuple[np.ndarray, int]:
 class FFTOperator:
     """Exact zero-padded convolution on the square grid (scipy.fft, fast sizes).
 
-    The convolution runs on the bounding box of the sources and targets only, padded to
-    a fast size of at least twice its width: inside the contact solve both are the
-    contact set, which is far smaller than the grid. Symbols are cached per box size."""
+    The convolution runs on the bounding box (width w) of the sources and targets only,
+    padded to a fast size P >= 2w - 1: inside the contact solve both are the contact set,
+    far smaller than the grid. The transform is pruned: only the w non-zero rows are
+    transformed along the rows, and only the w wanted rows are transformed back.
+    Symbols are cached per P. Small transforms run on one thread (bench: thread start-up
+    costs more than it saves below P ~ 512); pocketfft computes every 1-D transform the
+    same way for any thread count, so results do not depend on it."""
 
     name = "fft"
+    THREADED_SIZE = 512
 
     def __init__(self, spec: KernelSpec, layout: Layout, symbol=None, inverse: bool = False):
         if layout.shape is None:
@@ -100,13 +105,11 @@ class FFTOperator:
         self.all = np.arange(layout.n)
         self.workers = fft_workers()
         self._symbols: dict[int, np.ndarray] = {}
-        self._bufs: dict[int, np.ndarray] = {}
         if symbol is not None:
             self._store(symbol[1], symbol[0])
 
     def _store(self, P, sym):
         self._symbols[P] = 1.0 / sym if self.inverse else sym
-        self._bufs[P] = np.zeros((P, P))
 
     def apply(self, src, f_src, tgt=None):
         n = self.n
@@ -120,13 +123,15 @@ class FFTOperator:
         P = sfft.next_fast_len(2 * w - 1, real=True)
         if P not in self._symbols:
             self._store(P, box_symbol(self.spec, P, self.spacing))
-        buf = self._bufs[P]
-        scatter_box(buf, n, i0, j0, src, f_src)
-        spec = sfft.rfft2(buf, workers=self.workers)
-        clear_box(buf, n, i0, j0, src)
-        spec *= self._symbols[P]
-        box = sfft.irfft2(spec, s=(P, P), workers=self.workers)
-        return gather_box(box, n, i0, j0, tgt)
+        workers = self.workers if P >= self.THREADED_SIZE else 1
+        box = np.zeros((w, w))
+        scatter_box(box, n, i0, j0, src, f_src)
+        a = sfft.rfft(box, n=P, axis=1, workers=workers)
+        a = sfft.fft(a, n=P, axis=0, workers=workers, overwrite_x=True)
+        a *= self._symbols[P]
+        a = sfft.ifft(a, axis=0, workers=workers, overwrite_x=True)[:w]
+        u = sfft.irfft(a, n=P, axis=1, workers=workers)
+        return gather_box(u, n, i0, j0, tgt)
 
 
 class DirectOperator:

@@ -25,16 +25,19 @@ class SolveStats:
     residual: float
 
 
-def pcg(apply_A, b, x0, precond, tol, max_iter) -> tuple[np.ndarray, SolveStats]:
+def pcg(apply_A, b, x0, precond, tol, max_iter, Ax0=None) -> tuple[np.ndarray, SolveStats]:
     """Preconditioned CG for A x = b, stopping at ||b - A x|| <= tol ||b||.
 
-    Dot products are summed in fixed blocks, so the iterates do not depend on the
-    number of threads."""
+    ``Ax0``, if known, saves the first operator application. Dot products are summed in
+    fixed blocks, so the iterates do not depend on the number of threads."""
     bnorm = np.sqrt(blocked_dot(b, b))
     if bnorm == 0.0:
         return np.zeros_like(b), SolveStats(0, True, 0.0)
     x = x0.copy()
-    r = b - apply_A(x) if np.any(x) else b.copy()
+    if Ax0 is not None:
+        r = b - Ax0
+    else:
+        r = b - apply_A(x) if np.any(x) else b.copy()
     rnorm = np.sqrt(blocked_dot(r, r))
     if rnorm <= tol * bnorm:
         return x, SolveStats(0, True, rnorm / bnorm)
@@ -112,11 +115,13 @@ class ContactState:
         self.contact = np.zeros(n, dtype=bool)
         self.F = np.zeros(n)
         self.u = np.zeros(n)
-        # dF/dd on the current contact set, from the last two converged steps (warm start)
+        # dF/dd and du/dd from the last two converged steps (warm start)
         self._slope = None
+        self._uslope = None
         self._last_d = None
 
-    def _solve(self, d, guess):
+    def _solve(self, d, guess, u_guess=None):
+        """Solve on the current contact set; ``u_guess`` = C @ guess when known exactly."""
         prob = self.prob
         idx = np.flatnonzero(self.contact)
         if idx.size == 0:
@@ -126,21 +131,31 @@ class ContactState:
         op = prob.operator
         b = d - prob.x0[idx]
         precond = None if prob.precond is None else (lambda r: prob.precond(idx, r))
-        Fc, stats = pcg(lambda v: op.apply(idx, v, idx), b, guess[idx], precond, prob.tol, prob.max_iter)
+        Ax0 = None if u_guess is None else u_guess[idx]
+        Fc, stats = pcg(lambda v: op.apply(idx, v, idx), b, guess[idx], precond, prob.tol,
+                        prob.max_iter, Ax0=Ax0)
         self.F[:] = 0.0
         self.F[idx] = Fc
-        self.u = op.apply(idx, Fc)
+        # an accepted guess needs no new field: u = C @ guess is already known
+        self.u = u_guess if (u_guess is not None and stats.iters == 0) else op.apply(idx, Fc)
         return stats
 
     def advance(self, d: float, k: int, phase: str, out: CurveResult) -> StepRecord:
         prob = self.prob
-        guess = self.F
-        if self._slope is not None and self._last_d is not None:
-            guess = self.F + (d - self._last_d) * self._slope
-        start_F = self.F.copy()
+        guess, u_guess = self.F, None
+        if self._slope is not None:
+            # F and u = C F are both linear in d: C (F + c dF) = u + c du. The known field
+            # is the guess's own only if the guess vanishes off the contact set, i.e. no
+            # spring snapped in the last step (a snapped spring's dF is -F/dd).
+            c = d - self._last_d
+            guess = self.F + c * self._slope
+            if not self._slope[~self.contact].any():
+                u_guess = self.u + c * self._uslope
+        start_F, start_u = self.F.copy(), self.u.copy()
         rounds = iters = snapped = entered = 0
         while True:
-            stats = self._solve(d, guess)
+            stats = self._solve(d, guess, u_guess)
+            u_guess = None
             out.n_solves += 1 if self.contact.any() else 0
             iters += stats.iters
             out.max_residual = max(out.max_residual, stats.residual)
@@ -170,8 +185,9 @@ class ContactState:
         # (F is linear in d for a fixed set); still a good guess after small changes.
         if self._last_d is not None and d != self._last_d:
             self._slope = (self.F - start_F) / (d - self._last_d)
+            self._uslope = (self.u - start_u) / (d - self._last_d)
         else:
-            self._slope = None
+            self._slope = self._uslope = None
         self._last_d = d
         if (self.contact & prob.edge).any():
             out.edge_steps += 1
