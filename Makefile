@@ -1,7 +1,7 @@
 # tfm: the README's two setup commands are `make install` and `make test`.
 PYTHON ?= python3
 NAME ?=
-JOBS ?= 1
+JOBS ?= $(shell nproc 2>/dev/null || echo 1)
 
 .PHONY: install test test-slow run bench paper campaign campaigns clean
 

@@ -94,3 +94,19 @@ def test_preconditioners_are_symmetric_positive_definite(choice):
     # symmetric to round-off of a few FFTs
     assert np.allclose(dense, dense.T, rtol=0, atol=1e-12 * np.abs(dense).max())
     assert np.linalg.eigvalsh(0.5 * (dense + dense.T)).min() > 0
+
+
+@pytest.mark.parametrize("rings", [2, 3])
+def test_neighbors_foundation_compliance_matches_the_operator(rings):
+    """A uniform pressure sigma on a truncated kernel gives u = spacing * S(m) * sigma away
+    from the edges: the compliance that max_indent='auto' uses for kernel='neighbors'."""
+    from tfm import theory
+    p = tiny(kernel="neighbors", neighbor_rings=rings)
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    sigma = 2.0
+    every = np.arange(layout.n)
+    u = FFTOperator(spec, layout).apply(every, np.full(layout.n, sigma) * layout.area)
+    centre = layout.n // 2
+    expected = theory.neighbors_foundation_compliance(rings, p.self_term, p.spacing) * sigma
+    assert u[centre] == pytest.approx(expected, rel=1e-12)   # same finite sum: round-off

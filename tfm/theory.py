@@ -65,16 +65,29 @@ def effective_toughness(f_th, spacing):
     return f_th / spacing ** 1.5
 
 
+def neighbors_foundation_compliance(rings: int, self_term: float, spacing: float) -> float:
+    """Displacement per unit uniform pressure of the truncated kernel: spacing * S(m) with
+    S(m) = self_term + sum of 1/|k| over lattice points 0 < |k| <= m (S(2) = 12.63 at 3.8)."""
+    k = np.arange(-rings, rings + 1)
+    r = np.hypot(k[:, None], k[None, :])
+    mask = (r > 0) & (r <= rings * (1 + 1e-12))
+    return spacing * (self_term + float((1.0 / r[mask]).sum()))
+
+
 def auto_max_indent(p) -> float:
     """A preload deep enough that unloading starts beyond the pull-off contact radius.
 
     Boussinesq: the Hertz radius sqrt(R delta) must exceed the JKR critical radius, so
     delta = (1.5 a_c)^2 / R. Winkler: delta must exceed c_w sigma_th; take twice that.
+    A fixed number of neighbour rings acts as a Winkler foundation with the compliance of
+    ``neighbors_foundation_compliance``.
     """
     f_th = p.threshold_force
+    sigma = f_th / p.spacing ** 2
     if p.kernel == "local":
-        sigma = f_th / p.spacing ** 2
         delta = 2.0 * p.c_w * sigma
+    elif p.kernel == "neighbors":
+        delta = 2.0 * neighbors_foundation_compliance(p.neighbor_rings, p.self_term, p.spacing) * sigma
     else:
         a_c = jkr_critical_radius(effective_toughness(f_th, p.spacing), p.radius)
         delta = (1.5 * a_c) ** 2 / p.radius
