@@ -19,7 +19,7 @@ import scipy.fft as sfft
 from .config import STENCIL_RADIUS, fft_workers
 from .geometry import Layout
 from .kernels.direct import BOUSSINESQ, LOCAL, NEIGHBORS, direct_sum
-from .kernels.grid import clear_box, gather_box, index_box, scatter_box, stencil_apply
+from .kernels.grid import gather_box, index_box, scatter_box, stencil_apply
 from .params import ParameterError, Params
 
 

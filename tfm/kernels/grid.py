@@ -80,12 +80,3 @@ def gather_box(box, n, i0, j0, idx):
         f = idx[k]
         out[k] = box[f // n - i0, f % n - j0]
     return out
-
-
-@njit(**NUMBA_OPTS)
-def clear_box(buf, n, i0, j0, idx):
-    for k in range(idx.size):
-        f = idx[k]
-        buf[f // n - i0, f % n - j0] = 0.0
-
-
