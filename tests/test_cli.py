@@ -33,3 +33,8 @@ def test_tfm_run_flags_a_suspect_run_with_exit_3(tmp_path, capsys):
                "--step", "5e-3", "--extent", "0.15", "-o", str(tmp_path / "c.parquet"), "-q", "--no-plot"])
     assert rc == 3
     assert "grid edge" in capsys.readouterr().err
+
+
+def test_every_parameter_has_a_flag_with_help():
+    from tfm.cli import PARAM_HELP
+    assert set(PARAM_HELP) == set(Params.field_names())

@@ -10,6 +10,35 @@ from pathlib import Path
 from .params import ParameterError, Params
 
 
+PARAM_HELP = {
+    "spacing": "spring spacing Delta, e.g. 1/128",
+    "alpha": "threshold exponent: F_th = k_th * A^alpha",
+    "k_th": "threshold parameter K_th (sets f_th to none)",
+    "f_th": "explicit threshold force F_th",
+    "radius": "radius R of the body",
+    "shape": "sphere | paraboloid | flat_punch",
+    "kernel": "boussinesq | local | neighbors",
+    "self_term": "C_ii = self_term / sqrt(A) (the paper's 3.8)",
+    "neighbor_rings": "kernel=neighbors: keep 1/r for r <= m * spacing",
+    "c_w": "kernel=local: Winkler compliance, C_ii = c_w / A",
+    "operator": "fft | direct | tree",
+    "theta": "operator=tree: opening angle (0, 1]",
+    "layout": "square | hexagonal | jittered",
+    "jitter": "layout=jittered: offsets in spacings, [0, 0.5)",
+    "seed": "layout=jittered: random seed",
+    "max_indent": "preload delta_max, or auto (deep enough for the JKR pull-off)",
+    "step": "dilatation step",
+    "snap_rule": "batch (the paper) | single",
+    "tol": "relative residual of the contact solve",
+    "max_iter": "CG iterations per solve (hitting it is flagged)",
+    "max_rounds": "snap/enter rounds per step (hitting it is flagged)",
+    "max_unload_steps": "cap on unloading steps (default 20 x loading steps + 1000)",
+    "preconditioner": "auto | fft | stencil | diagonal | none",
+    "extent": "grid half-width (default: from the Hertz radius at max_indent)",
+    "extent_margin": "auto extent = margin * contact radius + 4 spacings",
+}
+
+
 def _add_param_flags(parser: argparse.ArgumentParser) -> None:
     """One flag per parameter, named like the field with dashes (--k-th, --max-indent)."""
     defaults = Params()
@@ -17,7 +46,7 @@ def _add_param_flags(parser: argparse.ArgumentParser) -> None:
         flag = "--" + f.name.replace("_", "-")
         default = getattr(defaults, f.name)
         parser.add_argument(flag, dest=f.name, default=None, metavar="VALUE",
-                            help=f"(default: {default!r})")
+                            help=f"{PARAM_HELP.get(f.name, '')} (default: {default!r})")
 
 
 def _params_from_args(args) -> Params:
