@@ -97,21 +97,36 @@ class FFTOperator:
     name = "fft"
     THREADED_SIZE = 512
 
-    def __init__(self, spec: KernelSpec, layout: Layout, symbol=None, inverse: bool = False):
+    def __init__(self, spec: KernelSpec, layout: Layout, symbol=None):
         if layout.shape is None:
             raise ParameterError("operator: 'fft' needs a regular square grid")
-        self.spec, self.spacing, self.inverse = spec, layout.spacing, inverse
+        self.spec, self.spacing = spec, layout.spacing
         self.n = layout.shape[0]
         self.all = np.arange(layout.n)
         self.workers = fft_workers()
         self._symbols: dict[int, np.ndarray] = {}
+        self._inverses: dict[int, np.ndarray] = {}
         if symbol is not None:
-            self._store(symbol[1], symbol[0])
+            self._symbols[symbol[1]] = symbol[0]
 
-    def _store(self, P, sym):
-        self._symbols[P] = 1.0 / sym if self.inverse else sym
+    def symbol(self, P: int) -> np.ndarray:
+        if P not in self._symbols:
+            self._symbols[P] = box_symbol(self.spec, P, self.spacing)
+        return self._symbols[P]
+
+    def inverse_symbol(self, P: int) -> np.ndarray:
+        if P not in self._inverses:
+            self._inverses[P] = 1.0 / self.symbol(P)
+        return self._inverses[P]
+
+    def apply_inverse(self, src, f_src, tgt=None):
+        """C^-1 on the box of src and tgt (the FFT preconditioner): same transforms."""
+        return self._convolve(src, f_src, tgt, self.inverse_symbol)
 
     def apply(self, src, f_src, tgt=None):
+        return self._convolve(src, f_src, tgt, self.symbol)
+
+    def _convolve(self, src, f_src, tgt, symbol_of):
         n = self.n
         if tgt is None:
             i0, j0, w, tgt = 0, 0, n, self.all
@@ -121,14 +136,12 @@ class FFTOperator:
             i0, j0, w = index_box(n, np.concatenate((src, tgt)))
         w = max(w, 1)
         P = sfft.next_fast_len(2 * w - 1, real=True)
-        if P not in self._symbols:
-            self._store(P, box_symbol(self.spec, P, self.spacing))
         workers = self.workers if P >= self.THREADED_SIZE else 1
         box = np.zeros((w, w))
         scatter_box(box, n, i0, j0, src, f_src)
         a = sfft.rfft(box, n=P, axis=1, workers=workers)
         a = sfft.fft(a, n=P, axis=0, workers=workers, overwrite_x=True)
-        a *= self._symbols[P]
+        a *= symbol_of(P)
         a = sfft.ifft(a, axis=0, workers=workers, overwrite_x=True)[:w]
         u = sfft.irfft(a, n=P, axis=1, workers=workers)
         return gather_box(u, n, i0, j0, tgt)
@@ -225,11 +238,11 @@ class FFTPreconditioner:
 
     name = "fft"
 
-    def __init__(self, spec: KernelSpec, layout: Layout):
-        self.op = FFTOperator(spec, layout, inverse=True)
+    def __init__(self, op: FFTOperator):
+        self.op = op            # shares the operator's symbol cache
 
     def __call__(self, idx, r):
-        return self.op.apply(idx, r, idx)
+        return self.op.apply_inverse(idx, r, idx)
 
 
 class DiagonalPreconditioner:
@@ -242,7 +255,7 @@ class DiagonalPreconditioner:
         return self.inv[idx] * r
 
 
-def make_preconditioner(p: Params, spec: KernelSpec, layout: Layout, symbol=None):
+def make_preconditioner(p: Params, spec: KernelSpec, layout: Layout, symbol=None, operator=None):
     choice = p.preconditioner
     if choice == "auto":
         # On the grid the FFT inverse halves-to-thirds the CG iterations of the stencil at
@@ -259,4 +272,5 @@ def make_preconditioner(p: Params, spec: KernelSpec, layout: Layout, symbol=None
     if choice == "stencil":
         sym, P = symbol if symbol is not None else grid_symbol(spec, layout)
         return StencilPreconditioner(sym, P, layout.shape[0])
-    return FFTPreconditioner(spec, layout)
+    fft = operator if isinstance(operator, FFTOperator) else FFTOperator(spec, layout, symbol)
+    return FFTPreconditioner(fft)

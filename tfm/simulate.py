@@ -22,7 +22,7 @@ def build_problem(p: Params) -> tuple[Problem, object]:
     symbol = grid_symbol(spec, layout) if layout.shape is not None else None
     check_positive_definite(p, spec, layout, symbol)
     op = make_operator(p, spec, layout, symbol)
-    pre = make_preconditioner(p, spec, layout, symbol)
+    pre = make_preconditioner(p, spec, layout, symbol, op)
     if p.f_th is not None:
         f_th = np.full(layout.n, float(p.f_th))
     else:
