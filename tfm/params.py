@@ -98,10 +98,9 @@ class Params:
     # ---- derived quantities -------------------------------------------------
     @property
     def threshold_force(self) -> float:
-        """F_th for a spring of area spacing**2 (the square grid's spring)."""
-        if self.f_th is not None:
-            return float(self.f_th)
-        return float(self.k_th) * (self.spacing ** 2) ** self.alpha
+        """Mean F_th of one spring of the layout (formula: ``tfm.threshold``)."""
+        from .threshold import mean_threshold
+        return mean_threshold(self)
 
     @property
     def delta_max(self) -> float:

@@ -10,6 +10,7 @@ from .operators import check_positive_definite, grid_symbol, kernel_spec, make_o
 from .params import Params
 from .results import RunResult, curve_frame, provenance, summarize
 from .solver import Problem, run_protocol
+from .threshold import threshold_forces
 
 
 class RunWarning(UserWarning):
@@ -23,11 +24,7 @@ def build_problem(p: Params) -> tuple[Problem, object]:
     check_positive_definite(p, spec, layout, symbol)
     op = make_operator(p, spec, layout, symbol)
     pre = make_preconditioner(p, spec, layout, symbol, op)
-    if p.f_th is not None:
-        f_th = np.full(layout.n, float(p.f_th))
-    else:
-        f_th = p.k_th * layout.area ** p.alpha
-    prob = Problem(x0=heights(p, layout), f_th=f_th, area=layout.area, edge=layout.edge,
+    prob = Problem(x0=heights(p, layout), f_th=threshold_forces(p, layout.area), area=layout.area, edge=layout.edge,
                    operator=op, precond=pre, tol=p.tol, max_iter=p.max_iter,
                    max_rounds=p.max_rounds, snap_rule=p.snap_rule)
     return prob, layout
