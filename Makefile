@@ -3,7 +3,7 @@ PYTHON ?= python3
 NAME ?=
 JOBS ?= $(shell nproc 2>/dev/null || echo 1)
 
-.PHONY: install test test-slow run bench paper campaign campaigns clean
+.PHONY: install test test-slow run bench paper limit campaign campaigns clean
 
 install:            ## install tfm and its test dependencies (editable)
 	$(PYTHON) -m pip install -q -e ".[test]"
@@ -29,6 +29,9 @@ campaigns:          ## list the campaign files
 
 paper:              ## every result of the paper: campaigns, figures, results/paper/REPORT.md
 	$(PYTHON) -m tfm.paper --jobs $(JOBS)
+
+limit:              ## beyond the paper: continuum limit of the pull-off coefficient, results/limit/REPORT.md
+	$(PYTHON) -m tfm.cli limit --jobs $(JOBS)
 
 clean:
 	rm -rf build dist *.egg-info .pytest_cache

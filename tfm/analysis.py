@@ -16,11 +16,11 @@ Pure functions on arrays and DataFrames; nothing here runs a simulation or write
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+from scipy import optimize, stats
 
 CONFIDENCE = 0.95
 
@@ -267,3 +267,218 @@ def _fraction(s: float) -> str:
 
 
 fraction_text = _fraction
+
+
+# ---- the continuum limit: y = y_inf + C x^-p ----------------------------------------
+# The convergence exponent p is searched on a log grid over this range. At p -> 0 the
+# term C x^-p becomes a constant and y_inf and C can no longer be told apart, so the
+# lower bound is what keeps y_inf finite; a fit whose p interval reaches it says so.
+LIMIT_P_BOUNDS = (0.05, 5.0)
+LIMIT_P_GRID = 4001
+
+
+@dataclass(frozen=True)
+class LimitFit:
+    """``y = y_inf + C x**-p`` fitted by least squares with profile-likelihood intervals.
+
+    The confidence set is {(y_inf, C, p): RSS <= RSS_min (1 + F_q(1, n-3) / (n-3))}, the
+    profile likelihood of one parameter under Gaussian errors of unknown variance
+    (Bates & Watts, *Nonlinear Regression Analysis*, 1988, Sec. 6.1). For a fixed p the
+    model is linear, so the set is an ellipse in (y_inf, C) and its extent is exact;
+    p runs over a grid. ``y_inf`` is the limit x -> infinity (here a_c/spacing)."""
+
+    y_inf: float
+    y_inf_low: float
+    y_inf_high: float
+    c: float
+    p: float
+    p_low: float
+    p_high: float
+    rss: float
+    n: int
+    p_bounds: tuple[float, float] = LIMIT_P_BOUNDS
+    confidence: float = CONFIDENCE
+    _grid: tuple = field(default=(), repr=False, compare=False)   # (p, y_inf, C, rss, (X'X)^-1, threshold) per p
+
+    @property
+    def sigma(self) -> float:
+        """Residual standard deviation of the best fit."""
+        return math.sqrt(self.rss / max(self.n - 3, 1))
+
+    @property
+    def p_open(self) -> tuple[bool, bool]:
+        """Whether the p interval reaches the search bounds (then it is open there)."""
+        lo, hi = self.p_bounds
+        return (self.p_low <= lo * (1 + 1e-9), self.p_high >= hi * (1 - 1e-9))
+
+    @property
+    def p_at_bound(self) -> bool:
+        lo, hi = self.p_bounds
+        return self.p <= lo * (1 + 1e-6) or self.p >= hi * (1 - 1e-6)
+
+    def contains(self, value: float) -> bool:
+        return self.y_inf_low <= value <= self.y_inf_high
+
+    def predict(self, x):
+        return self.y_inf + self.c * np.asarray(x, dtype=float) ** -self.p
+
+    def band(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper edge of the model curves in the confidence set at each x (at
+        x = inf this is the y_inf interval)."""
+        p = self._grid[0]
+        x = np.atleast_1d(np.asarray(x, dtype=float))
+        z = np.where(np.isinf(x)[None, :], 0.0, x[None, :] ** -p[:, None])
+        lo, hi = _limit_extent(self._grid, z)
+        return lo, hi
+
+    def text(self, digits: int = 3) -> str:
+        return f"{self.y_inf:.{digits}f} [{self.y_inf_low:.{digits}f}, {self.y_inf_high:.{digits}f}]"
+
+    def p_text(self, digits: int = 2) -> str:
+        lo, hi = self.p_open
+        left = "≤" if lo else ""
+        right = "≥" if hi else ""
+        return f"{self.p:.{digits}f} [{left}{self.p_low:.{digits}f}, {right}{self.p_high:.{digits}f}]"
+
+    def crossing(self, value: float) -> float:
+        """The x at which the best-fit curve equals ``value`` (nan if it never does)."""
+        ratio = (value - self.y_inf) / self.c if self.c != 0 else math.nan
+        return ratio ** (-1.0 / self.p) if ratio > 0 else math.nan
+
+
+def _limit_extent(grid, z) -> tuple[np.ndarray, np.ndarray]:
+    """min and max of y_inf + C z over the confidence set, for z = x^-p per grid row."""
+    p, y0, c, rss, inv, threshold = grid
+    ok = rss <= threshold
+    slack = np.clip(threshold - rss[ok], 0.0, None)
+    # g = (1, z): centre y0 + C z, half-width sqrt(slack g' (X'X)^-1 g)
+    zz = z[ok]
+    centre = y0[ok, None] + c[ok, None] * zz
+    quad = inv[ok, 0, 0, None] + 2.0 * inv[ok, 0, 1, None] * zz + inv[ok, 1, 1, None] * zz * zz
+    half = np.sqrt(slack[:, None] * np.clip(quad, 0.0, None))
+    return (centre - half).min(axis=0), (centre + half).max(axis=0)
+
+
+def fit_limit(x, y, confidence: float = CONFIDENCE, p_bounds: tuple[float, float] = LIMIT_P_BOUNDS) -> LimitFit:
+    """Fit ``y = y_inf + C x**-p`` (y_inf, C, p free) with profile-likelihood intervals.
+
+    For each p on a log grid over ``p_bounds`` the model is linear in (y_inf, C) and is
+    solved exactly; the best p minimises the residual sum of squares. The interval of
+    y_inf is its extent over the confidence set (see ``LimitFit``), that of p the grid
+    points whose best RSS is under the threshold. Needs at least four points."""
+    x, y = _clean(x, y)
+    if np.any(~np.isfinite(x)) or np.any(~np.isfinite(y)) or np.any(x <= 0):
+        raise ValueError("fit_limit: x must be finite and > 0, y finite")
+    n = x.size
+    if n < 4:
+        raise ValueError(f"fit_limit: three free parameters need at least four points, got {n}")
+    if np.unique(x).size < 3:
+        raise ValueError("fit_limit: need at least three distinct x")
+    lo, hi = p_bounds
+    if not 0 < lo < hi:
+        raise ValueError(f"fit_limit: p_bounds must satisfy 0 < low < high, got {p_bounds}")
+    p = np.geomspace(lo, hi, LIMIT_P_GRID)
+    z = x[None, :] ** -p[:, None]                       # (grid, n)
+    s0, s1 = float(n), z.sum(axis=1)
+    s11 = (z * z).sum(axis=1)
+    sy, szy = y.sum(), (z * y[None, :]).sum(axis=1)
+    det = s0 * s11 - s1 * s1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y0 = (s11 * sy - s1 * szy) / det
+        c = (s0 * szy - s1 * sy) / det
+    resid = y[None, :] - y0[:, None] - c[:, None] * z
+    rss = (resid * resid).sum(axis=1)
+    good = np.isfinite(rss) & (det > 1e-14 * s0 * s11)
+    if not good.any():
+        raise ValueError("fit_limit: the model is degenerate for every p (x nearly constant?)")
+    rss = np.where(good, rss, np.inf)
+    k = int(np.argmin(rss))
+    rss_min = float(rss[k])
+    dof = n - 3
+    threshold = rss_min * (1.0 + float(stats.f.ppf(confidence, 1, dof)) / dof) if dof > 0 else math.inf
+    inv = np.empty((p.size, 2, 2))
+    inv[:, 0, 0], inv[:, 0, 1], inv[:, 1, 1] = s11 / det, -s1 / det, s0 / det
+    inv[:, 1, 0] = inv[:, 0, 1]
+    grid = (p, y0, c, rss, inv, threshold)
+    inside = np.flatnonzero(rss <= threshold)
+    ylo, yhi = _limit_extent(grid, np.zeros((p.size, 1)))
+    # refine the best p between its grid neighbours (the grid step is 0.1 % in p)
+    best = optimize.minimize_scalar(lambda q: _limit_linear(x, y, q)[2], method="bounded",
+                                    bounds=(p[max(k - 1, 0)], p[min(k + 1, p.size - 1)]))
+    pk, y0k, ck, rssk = (float(best.x), *_limit_linear(x, y, float(best.x))) if best.fun < rss_min else \
+        (float(p[k]), float(y0[k]), float(c[k]), rss_min)
+    return LimitFit(y0k, float(min(ylo[0], y0k)), float(max(yhi[0], y0k)), ck, pk,
+                    float(min(p[inside.min()], pk)), float(max(p[inside.max()], pk)), rssk, n, (lo, hi),
+                    confidence, grid)
+
+
+def _limit_linear(x, y, p: float) -> tuple[float, float, float]:
+    """(y_inf, C, RSS) of the linear least-squares fit at a fixed p."""
+    X = np.column_stack([np.ones_like(x), x ** -p])
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ coef
+    return float(coef[0]), float(coef[1]), float(r @ r)
+
+
+def step_sampling_bound(curve: pd.DataFrame, window: int = 10) -> float:
+    """How much the sampled pull-off force can miss the top of the force curve, relative.
+
+    Between two snaps the contact set is fixed and the tension grows linearly with the
+    unloading; F_max is sampled once per step, so it misses the top of the last such
+    rise by up to one step's rise. Returns the largest tension rise over one step with no
+    snap and no entry, among the ``window`` steps before the pull-off, over F_max (nan
+    if there is no such step)."""
+    c = curve.sort_values("step")
+    tension = -c["force"].to_numpy()
+    k = int(np.argmax(tension))
+    if tension[k] <= 0:
+        return math.nan
+    quiet = (c["n_snapped"].to_numpy() == 0) & (c["n_entered"].to_numpy() == 0)
+    rises = [tension[i] - tension[i - 1] for i in range(max(1, k - window), k + 1)
+             if quiet[i] and c["phase"].iloc[i] == "unload" and c["phase"].iloc[i - 1] == "unload"]
+    rises = [r for r in rises if r > 0]
+    return float(max(rises) / tension[k]) if rises else math.nan
+
+
+@dataclass(frozen=True)
+class Plateau(_Interval):
+    """Mean of y over the points with x >= x_min, with a Student-t interval."""
+
+    value_name = "mean"
+    mean: float
+    ci_low: float
+    ci_high: float
+    n: int
+    x_min: float
+    drift: LineFit | None = None     # y against ln x over the same points
+    confidence: float = CONFIDENCE
+
+    def contains(self, value: float) -> bool:
+        return self.ci_low <= value <= self.ci_high
+
+    @property
+    def flat(self) -> bool:
+        """Whether the points show no drift: the interval of dy/d ln x contains 0."""
+        return self.drift is not None and self.drift.ci_low <= 0.0 <= self.drift.ci_high
+
+
+# the plateau is taken over the top two octaves of x: far enough from the coarse end,
+# with enough points (six at three per octave) for a t interval
+PLATEAU_OCTAVES = 2.0
+
+
+def plateau(x, y, confidence: float = CONFIDENCE) -> Plateau:
+    """The level of y over the top ``PLATEAU_OCTAVES`` octaves of x.
+
+    Where the limit fit cannot find a trend (its p interval open), this is the estimate
+    that assumes none is left: it is only as good as that assumption, and says so by its
+    width (the scatter of the points, e.g. the staircase of the discrete contact edge)."""
+    x, y = _clean(x, y)
+    x_min = float(x.max()) / 2.0 ** PLATEAU_OCTAVES
+    keep = x >= x_min * (1 - 1e-12)
+    sel = y[keep]
+    n = sel.size
+    mean = float(sel.mean())
+    half = _t_quantile(n - 1, confidence) * float(sel.std(ddof=1)) / math.sqrt(n) if n > 1 else math.inf
+    drift = fit_line(np.log(x[keep]), sel, confidence=confidence) if n > 2 else None
+    return Plateau(mean, mean - half, mean + half, n, x_min, drift, confidence)

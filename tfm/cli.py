@@ -105,6 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=cmd_run)
     from .campaign.cli import register
     register(sub)
+    from .paper.cli import register as register_paper   # tfm paper, tfm limit
+    register_paper(sub)
     return parser
 
 

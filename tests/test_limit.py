@@ -1,0 +1,154 @@
+"""The continuum-limit fit (tfm.analysis.fit_limit) on synthetic data with known answers,
+and the limit campaigns' files (issue 12). The fits take milliseconds; no simulation runs.
+
+The slow tier (test_limit_slow.py) fits real runs."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tfm import theory
+from tfm.analysis import LIMIT_P_BOUNDS, fit_limit, step_sampling_bound
+from tfm.campaign import load_spec
+from tfm.paper.limit import coefficient, spec_ratio, split_preloads
+
+REPO = Path(__file__).resolve().parents[1]
+# the campaign's a_c/spacing: 8 .. 256, three per octave
+X = 8.0 * 2.0 ** (np.arange(16) / 3.0)
+Y_INF, C, P = 7.5, 4.0, 0.7
+
+
+def test_exact_data_give_the_parameters_back():
+    fit = fit_limit(X, Y_INF + C * X ** -P)
+    # noiseless: only the bounded scalar search on p limits the accuracy (xatol ~ 1e-5 of p)
+    assert fit.y_inf == pytest.approx(Y_INF, abs=1e-6)
+    assert fit.p == pytest.approx(P, abs=1e-5)
+    assert fit.c == pytest.approx(C, rel=1e-5)
+    assert fit.y_inf_low <= fit.y_inf <= fit.y_inf_high
+    assert fit.crossing(Y_INF + C * 32.0 ** -P) == pytest.approx(32.0, rel=1e-4)
+
+
+def test_intervals_cover_the_truth_at_their_stated_rate():
+    """Over 300 noisy data sets the 95 % intervals of y_inf and p contain the truth
+    0.95 +- 3 binomial standard deviations of the time (sd = sqrt(.95 .05 / 300) = 0.0126):
+    a wrong threshold or a wrong band would miss that by far."""
+    rng = np.random.default_rng(12)
+    n = 300
+    hit_y = hit_p = 0
+    for _ in range(n):
+        y = Y_INF + C * X ** -P + rng.normal(0.0, 0.02, X.size)
+        fit = fit_limit(X, y)
+        hit_y += fit.contains(Y_INF)
+        hit_p += fit.p_low <= P <= fit.p_high
+    sd = math.sqrt(0.95 * 0.05 / n)
+    assert abs(hit_y / n - 0.95) < 3 * sd
+    assert abs(hit_p / n - 0.95) < 3 * sd
+
+
+def test_band_at_infinity_is_the_limit_interval_and_holds_the_best_curve():
+    rng = np.random.default_rng(3)
+    y = Y_INF + C * X ** -P + rng.normal(0.0, 0.02, X.size)
+    fit = fit_limit(X, y)
+    lo, hi = fit.band(np.array([np.inf, 8.0, 64.0]))
+    assert lo[0] == pytest.approx(fit.y_inf_low, rel=1e-12)
+    assert hi[0] == pytest.approx(fit.y_inf_high, rel=1e-12)
+    best = fit.predict(np.array([8.0, 64.0]))
+    assert np.all(lo[1:] <= best) and np.all(best <= hi[1:])
+
+
+def test_interval_narrows_with_less_noise():
+    rng = np.random.default_rng(5)
+    noise = rng.normal(0.0, 1.0, X.size)
+    widths = [(f.y_inf_high - f.y_inf_low) for f in (fit_limit(X, Y_INF + C * X ** -P + s * noise)
+                                                     for s in (0.04, 0.01))]
+    # the width is proportional to the noise for a locally linear model: 4x less noise, ~4x narrower
+    assert widths[1] < widths[0] / 3
+
+
+def test_flat_data_leave_p_open():
+    """With no trend at all, p is not determined: its interval reaches a search bound."""
+    rng = np.random.default_rng(7)
+    fit = fit_limit(X, 1.0 + rng.normal(0.0, 0.01, X.size))
+    assert any(fit.p_open)
+
+
+@pytest.mark.parametrize("x,y,match", [
+    ([1, 2, 3], [1, 2, 3], "four points"),
+    ([1, 1, 2, 2], [1, 2, 3, 4], "three distinct"),
+    ([0, 1, 2, 3], [1, 2, 3, 4], "> 0"),
+    ([1, 2, 3, np.nan], [1, 2, 3, 4], "finite"),
+])
+def test_bad_input_is_refused(x, y, match):
+    with pytest.raises(ValueError, match=match):
+        fit_limit(x, y)
+
+
+def test_p_bounds_are_checked():
+    with pytest.raises(ValueError, match="p_bounds"):
+        fit_limit(X, Y_INF + C * X ** -P, p_bounds=(0.0, 1.0))
+    assert LIMIT_P_BOUNDS[0] > 0
+
+
+def test_step_sampling_bound_is_one_steps_rise_over_the_peak():
+    import pandas as pd
+
+    # tension rises by 0.1 per quiet step to 2.0, then a snap drops it
+    tension = [0.0, 0.5, 1.7, 1.8, 1.9, 2.0, 1.2]
+    curve = pd.DataFrame({"step": range(7), "phase": ["load"] + ["unload"] * 6,
+                          "force": [-t for t in tension], "n_snapped": [0, 0, 0, 0, 0, 0, 5],
+                          "n_entered": [0] * 7})
+    assert step_sampling_bound(curve) == pytest.approx(1.2 / 2.0)   # the largest quiet rise, 0.5 -> 1.7
+    curve.loc[2, "n_snapped"] = 3                                  # that rise had a snap: not a sampling rise
+    assert step_sampling_bound(curve) == pytest.approx(0.1 / 2.0)
+
+
+# ---- the limit campaigns (issue 12) ---------------------------------------------------
+@pytest.mark.parametrize("stem", ["limit_sphere", "limit_punch"])
+def test_limit_campaign_covers_the_range(stem):
+    spec = load_spec(REPO / "campaigns" / f"{stem}.toml")
+    ratios = np.array([spec_ratio(r.params) for r in spec.runs])
+    terms = {round(r.params.self_term, 4) for r in spec.runs}
+    assert terms == {round(theory.SELF_TERM_MEAN, 4), round(theory.SELF_TERM_CENTRE, 4), theory.PAPER_SELF_TERM}
+    main = min(r.params.delta_max for r in spec.runs)
+    for st in terms:
+        mine = [r for r in spec.runs if round(r.params.self_term, 4) == st]
+        xs = np.array(sorted(spec_ratio(r.params) for r in mine if r.params.delta_max == main))
+        assert len(xs) >= 11 and xs[0] <= 8.5 and xs[-1] >= 250
+        assert np.all(np.diff(np.log2(xs)) <= 0.5), "at least two points per octave"
+        assert np.unique(np.round(xs % 1.0, 2)).size > len(xs) // 2, "staggered edge positions"
+        deep = {r.params.spacing for r in mine if r.params.delta_max > main}
+        assert len(deep) >= 4
+    assert ratios.min() > 0
+    for r in spec.runs:
+        p = r.params
+        assert p.alpha == 0.75 and p.kernel == "boussinesq"
+        if p.shape == "paraboloid":
+            a_c = theory.jkr_critical_radius(theory.effective_toughness(p.threshold_force, p.spacing), p.radius)
+            assert math.sqrt(p.radius * p.delta_max) >= 1.2 * a_c      # deep enough (PHYSICS.md)
+        else:
+            assert p.shape == "flat_punch"
+
+
+def test_coefficients_are_one_for_the_continuum_answers():
+    """coefficient() divides by 3pi^2/4 K^2 R and by Kendall's force: the continuum answers
+    give 3pi^2/4 and 1 exactly; Kendall in these units is 2 sqrt(pi) K a^1.5."""
+    spec = load_spec(REPO / "campaigns" / "limit_sphere.toml")
+    p = spec.runs[0].params
+    assert coefficient(p, theory.jkr_pull_off(p.k_th, p.radius)) == pytest.approx(theory.JKR_COEFFICIENT, rel=1e-12)
+    q = load_spec(REPO / "campaigns" / "limit_punch.toml").runs[0].params
+    kendall = 2.0 * math.sqrt(math.pi) * q.k_th * q.radius ** 1.5
+    assert theory.kendall_force(q.radius, theory.gamma_from_k(q.k_th)) == pytest.approx(kendall, rel=1e-12)
+    assert coefficient(q, kendall) == pytest.approx(1.0, rel=1e-12)
+
+
+def test_split_preloads_pairs_deep_runs_with_their_main_run():
+    import pandas as pd
+
+    pts = pd.DataFrame({"self_term": [3.8] * 3, "spacing": [0.1, 0.05, 0.05], "max_indent": [0.05, 0.05, 0.09],
+                        "ratio": [2.0, 4.0, 4.0], "F_max": [1.0, 2.0, 2.02], "y": [1, 2, 2.02]})
+    main, pairs = split_preloads(pts)
+    assert len(main) == 2 and len(pairs) == 1
+    assert pairs["change"].iloc[0] == pytest.approx(0.01)

@@ -1,0 +1,424 @@
+"""Beyond the paper: the continuum limit of the pull-off coefficient, with an error bar.
+
+``tfm limit`` (``make limit``) runs ``campaigns/limit_sphere.toml`` and
+``campaigns/limit_punch.toml`` (or resumes them), fits, per geometry and self term,
+
+    y = y_inf + C (a/Δ)^-p,    y = F_max / (K² R) (paraboloid, a = a_c, the JKR radius)
+                               y = F_max / F_Kendall (flat punch, a = its radius),
+
+with ``tfm.analysis.fit_limit`` (profile-likelihood 95 % intervals), and writes
+``results/limit/REPORT.md``, ``limit.png`` and ``summary.json``. The effective
+toughness follows as K_eff/K_th = sqrt(y_inf / (3π²/4)) for the paraboloid and y_inf
+for the punch (F ∝ K² R and F ∝ K a^1.5): a lattice constant would give the same K_eff
+in both geometries. ``--analyse-only`` reads the runs stored so far without touching
+the campaign's files, so it is safe while a campaign is still running.
+"""
+from __future__ import annotations
+
+import dataclasses
+import datetime as _dt
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .. import analysis, theory
+from ..analysis import fraction_text
+
+# (geometry, campaign file stem)
+LIMIT_CAMPAIGNS = (("paraboloid", "limit_sphere"), ("flat punch", "limit_punch"))
+# fewest points for a fit with an interval (3 parameters + 2 degrees of freedom)
+MIN_FIT_POINTS = 5
+REFERENCE = {"paraboloid": theory.JKR_COEFFICIENT, "flat punch": 1.0}
+Y_LABEL = {"paraboloid": "F_max/(K_th² R)", "flat punch": "F_max/F_Kendall"}
+
+
+# ---- the stored runs ---------------------------------------------------------------
+def spec_ratio(params) -> float:
+    """a/Δ of a run: the JKR critical radius (paraboloid) or the punch radius, in spacings."""
+    if params.shape == "flat_punch":
+        return params.radius / params.spacing
+    k_eff = theory.effective_toughness(params.threshold_force, params.spacing)
+    return theory.jkr_critical_radius(k_eff, params.radius) / params.spacing
+
+
+def coefficient(params, f_max: float) -> float:
+    """F_max over the continuum reference with K = K_eff: (K² R) or Kendall's force."""
+    k_eff = theory.effective_toughness(params.threshold_force, params.spacing)
+    if params.shape == "flat_punch":
+        return f_max / theory.kendall_force(params.radius, theory.gamma_from_k(k_eff))
+    return f_max / (k_eff ** 2 * params.radius)
+
+
+def stored_points(geometry: str, spec, results_dir: Path) -> pd.DataFrame:
+    """One row per stored run of the campaign (read-only: the run files, not the tables)."""
+    import pyarrow.parquet as pq
+
+    from ..campaign import CampaignStore
+
+    store = CampaignStore.for_spec(spec, results_dir)
+    rows = []
+    for run in spec.runs:
+        meta = store.run_metadata(run.run_id)
+        if meta is None:
+            continue
+        s, p = meta["summary"], run.params
+        curve = pq.read_table(store.run_path(run.run_id)).to_pandas()
+        rows.append({"geometry": geometry, "run_id": run.run_id, "self_term": p.self_term,
+                     "spacing": p.spacing, "ratio": spec_ratio(p), "max_indent": p.delta_max,
+                     "step": p.step, "F_max": s["pull_off_force"], "y": coefficient(p, s["pull_off_force"]),
+                     "step_bound": analysis.step_sampling_bound(curve), "wall_time": s["wall_time"],
+                     "warnings": s.get("warnings", "")})
+    return pd.DataFrame(rows)
+
+
+def split_preloads(points: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(points at the campaign's main, shallowest preload; preload-independence pairs)."""
+    if points.empty:
+        return points, pd.DataFrame()
+    main_preload = points["max_indent"].min()
+    main = points[np.isclose(points["max_indent"], main_preload)].sort_values(["self_term", "ratio"])
+    deep = points[~np.isclose(points["max_indent"], main_preload)]
+    pairs = deep.merge(main[["self_term", "spacing", "max_indent", "F_max"]], on=["self_term", "spacing"],
+                       suffixes=("_deep", ""))
+    pairs["change"] = pairs["F_max_deep"] / pairs["F_max"] - 1.0
+    return main.reset_index(drop=True), pairs.reset_index(drop=True)
+
+
+# ---- the fits ------------------------------------------------------------------------
+@dataclasses.dataclass
+class LimitResult:
+    geometry: str
+    self_term: float
+    points: pd.DataFrame
+    fit: analysis.LimitFit | None
+    pairs: pd.DataFrame
+    level: analysis.Plateau | None = None
+
+    @property
+    def trend_found(self) -> bool:
+        """Whether the fit pins p: its interval stays off the lower search bound, where
+        y_inf and C stop being separable and y_inf runs off."""
+        return self.fit is not None and not self.fit.p_open[0]
+
+    @property
+    def estimate(self) -> tuple[float, float, float, str]:
+        """The limit y_inf (best, low, high) and where it comes from: the fit if it finds a
+        trend, else the plateau of the top octaves (which assumes none is left)."""
+        if self.trend_found:
+            f = self.fit
+            return f.y_inf, f.y_inf_low, f.y_inf_high, "fit"
+        if self.level is not None and self.level.flat:
+            lv = self.level
+            return lv.mean, lv.ci_low, lv.ci_high, f"plateau, a/Δ ≥ {lv.x_min:.0f}"
+        return math.nan, math.nan, math.nan, "—"
+
+    @property
+    def k_ratio(self) -> tuple[float, float, float]:
+        """K_eff/K_th (best, low, high) from ``estimate``: y_inf itself for the punch (F ∝ K),
+        sqrt(y_inf / (3π²/4)) for the paraboloid (F ∝ K²)."""
+        vals = self.estimate[:3]
+        if self.geometry == "flat punch":
+            return vals
+        ref = theory.JKR_COEFFICIENT
+        return tuple(math.sqrt(v / ref) if v > 0 else math.nan for v in vals)
+
+    @property
+    def largest_ratio(self) -> float:
+        return float(self.points["ratio"].max()) if len(self.points) else math.nan
+
+    @property
+    def preload_change(self) -> float:
+        """The largest |F_max(deep)/F_max - 1| over the pairs (nan without pairs)."""
+        return float(self.pairs["change"].abs().max()) if len(self.pairs) else math.nan
+
+
+def fit_all(points: pd.DataFrame) -> list[LimitResult]:
+    out = []
+    for geometry, _ in LIMIT_CAMPAIGNS:
+        main, pairs = split_preloads(points[points["geometry"] == geometry] if len(points) else points)
+        for st in sorted(set(main["self_term"])) if len(main) else []:
+            pts = main[main["self_term"] == st]
+            fit = analysis.fit_limit(pts["ratio"], pts["y"]) if len(pts) >= MIN_FIT_POINTS else None
+            level = analysis.plateau(pts["ratio"], pts["y"]) if len(pts) >= MIN_FIT_POINTS else None
+            prs = pairs[pairs["self_term"] == st] if len(pairs) else pairs
+            out.append(LimitResult(geometry, st, pts, fit, prs, level))
+    return out
+
+
+# ---- the figure ----------------------------------------------------------------------
+def plot_limit(results: list[LimitResult], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    geometries = [g for g, _ in LIMIT_CAMPAIGNS if any(r.geometry == g for r in results)]
+    fig, axes = plt.subplots(1, max(1, len(geometries)), figsize=(6.2 * max(1, len(geometries)), 4.6), squeeze=False)
+    colors = {theory.SELF_TERM_MEAN: "tab:blue", theory.SELF_TERM_CENTRE: "tab:green", theory.PAPER_SELF_TERM: "tab:red"}
+    for ax, geometry in zip(axes[0], geometries):
+        for r in (r for r in results if r.geometry == geometry):
+            color = min(colors.items(), key=lambda kv: abs(kv[0] - r.self_term))[1]
+            inv = 1.0 / r.points["ratio"].to_numpy()
+            ax.plot(inv, r.points["y"], "o", color=color, ms=4, label=f"self term {r.self_term:g}")
+            if len(r.pairs):
+                ax.plot(1.0 / (r.pairs["spacing"].map(dict(zip(r.points["spacing"], r.points["ratio"])))),
+                        r.pairs["F_max_deep"] / r.pairs["F_max"] * r.pairs["spacing"].map(
+                            dict(zip(r.points["spacing"], r.points["y"]))),
+                        "x", color=color, ms=7, label="deeper preload" if r.self_term == results[0].self_term else None)
+            best, lo_y, hi_y, source = r.estimate
+            if r.trend_found:
+                xs = np.linspace(0.0, inv.max() * 1.05, 200)
+                ratio = np.where(xs > 0, 1.0 / np.maximum(xs, 1e-300), np.inf)
+                lo, hi = r.fit.band(ratio)
+                ax.fill_between(xs, lo, hi, color=color, alpha=0.18, lw=0)
+                ax.plot(xs, r.fit.predict(np.where(np.isinf(ratio), 1e300, ratio)), "-", color=color, lw=1)
+            elif r.level is not None and r.level.flat:        # no trend: the plateau of the top octaves
+                xs = np.array([0.0, 1.0 / r.level.x_min])
+                ax.fill_between(xs, [lo_y] * 2, [hi_y] * 2, color=color, alpha=0.18, lw=0)
+                ax.plot(xs, [best] * 2, "--", color=color, lw=1)
+            if math.isfinite(best):
+                ax.errorbar([0.0], [best], yerr=[[best - lo_y], [hi_y - best]], fmt="s", color=color, ms=5, capsize=3)
+        ref = REFERENCE[geometry]
+        ax.axhline(ref, color="k", ls="--", lw=0.8,
+                   label="JKR/LEFM 3π²/4" if geometry == "paraboloid" else "Kendall")
+        if geometry == "paraboloid":
+            ax.axhline(theory.PAPER_COEFFICIENT, color="0.5", ls=":", lw=1, label=f"paper {theory.PAPER_COEFFICIENT:g}")
+        ax.set_xlim(left=-0.004)
+        ax.set_xlabel("Δ/a" + ("_c (JKR critical radius)" if geometry == "paraboloid" else " (punch radius)"))
+        ax.set_ylabel(Y_LABEL[geometry])
+        ax.set_title(f"{geometry}: y∞ + C (a/Δ)^-p (solid) or plateau (dashed), 95 %", fontsize=9)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# ---- the report ----------------------------------------------------------------------
+def paper_ratio_range(results_dir=None) -> tuple[float, float, float]:
+    """(a_c/Δ min, max, spacing) of the paper's Fig. 6 runs, from its campaign file."""
+    from .run import load_spec_for
+
+    spec = load_spec_for("paper_fig6_jkr_scaling")
+    ratios = [spec_ratio(r.params) for r in spec.runs if r.params.threshold_force > 0]
+    return min(ratios), max(ratios), spec.runs[0].params.spacing
+
+
+def verdict_76(res: LimitResult) -> str:
+    """What the limit at the paper's self term says about the paper's 7.6."""
+    best, low, high, source = res.estimate
+    c = theory.PAPER_COEFFICIENT
+    lo, hi, spacing = paper_ratio_range()
+    where = f"the paper's fit at Δ = {fraction_text(spacing)} spans a_c/Δ = {lo:.0f}–{hi:.0f} in our units"
+    cross = res.fit.crossing(c) if res.trend_found else math.nan
+    at = f"; the fitted curve passes {c:g} at a_c/Δ ≈ {cross:.0f}" if math.isfinite(cross) else ""
+    if low <= c <= high:
+        return (f"{c:g} lies inside the 95 % interval of the limit ({source}), so these data cannot tell "
+                f"it from a converged number ({where}{at}).")
+    if c > high:
+        return (f"{c:g} is above the 95 % interval of the limit ({source}): it is a value at the paper's "
+                f"spacing, not a converged number ({where}{at}).")
+    return (f"{c:g} is below the 95 % interval of the limit ({source}), which these data place higher "
+            f"({where}{at}).")
+
+
+def _interval(lo, best, hi, digits=3) -> str:
+    return f"{best:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
+
+
+def summary_table(results: list[LimitResult]) -> pd.DataFrame:
+    rows = []
+    for r in results:
+        f = r.fit
+        k, klo, khi = r.k_ratio
+        rows.append({
+            "geometry": r.geometry, "self term": f"{r.self_term:g}", "points": len(r.points),
+            "largest a/Δ": f"{r.largest_ratio:.0f}",
+            "fit y∞ (95 %)": f.text(3) if f else "—",
+            "fit p (95 %)": f.p_text(2) if f else "—",
+            "plateau (95 %)": (f"{r.level.mean:.3f} [{r.level.ci_low:.3f}, {r.level.ci_high:.3f}] "
+                               f"(a/Δ ≥ {r.level.x_min:.0f}" + ("" if r.level.flat else ", still drifting")
+                               + ")") if r.level else "—",
+            "K_eff/K_th (95 %)": f"{_interval(klo, k, khi)} ({r.estimate[3]})" if f else "—",
+            "residual σ": f"{f.sigma:.3g}" if f else "—",
+            "preload check: max |ΔF_max|": (f"{100 * r.preload_change:.2f} % ({len(r.pairs)} pairs)"
+                                            if len(r.pairs) else "no pairs yet"),
+            "step bound (max)": f"{100 * r.points['step_bound'].max():.2f} %",
+        })
+    return pd.DataFrame(rows)
+
+
+def same_constant(results: list[LimitResult]) -> list[str]:
+    """Whether the paraboloid and the punch give the same K_eff/K_th per self term."""
+    out = []
+    by = {(r.geometry, round(r.self_term, 4)): r for r in results if r.fit is not None}
+    for (geometry, st), r in sorted(by.items()):
+        if geometry != "paraboloid" or ("flat punch", st) not in by:
+            continue
+        a, b = r.k_ratio, by[("flat punch", st)].k_ratio
+        overlap = a[1] <= b[2] and b[1] <= a[2]
+        out.append(f"- self term {st:g}: K_eff/K_th = {_interval(a[1], a[0], a[2])} (paraboloid) and "
+                   f"{_interval(b[1], b[0], b[2])} (flat punch): "
+                   + ("the intervals overlap, consistent with one lattice constant."
+                      if overlap else f"the intervals do not overlap (difference {100 * (a[0] / b[0] - 1):+.1f} %): "
+                      "not one constant at the a/Δ reached."))
+    return out
+
+
+def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitResult], specs: dict,
+                       wall: float, computed: int, jobs: int, start_load: float) -> dict:
+    from .report import machine, md_table
+
+    m = machine()
+    pending = {g: len(spec.runs) - int((points["geometry"] == g).sum() if len(points) else 0) for g, spec in specs.items()}
+    run_seconds = float(points["wall_time"].sum()) if len(points) else 0.0
+    lines = [
+        "# Beyond the paper: the continuum limit",
+        "",
+        "Generated by `make limit` (`tfm limit`) on "
+        f"{_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}. Do not edit by hand. Back to the [paper report](../paper/REPORT.md).",
+        "",
+        "The paper's pull-off coefficient c = F_max/(K_th² R) = 7.6 was measured at one spacing. tfm's "
+        "coefficient still falls as the JKR radius a_c grows in units of the spacing Δ, so here "
+        "α = 0.75 runs are refined until a_c/Δ is large and fitted, per self term, with",
+        "",
+        "    y = y∞ + C (a/Δ)^-p        (y∞, C, p free; profile-likelihood 95 % intervals, `tfm.analysis.fit_limit`)",
+        "",
+        f"with y = F_max/(K_th² R) for the paraboloid (a = a_c; JKR/LEFM: 3π²/4 = {theory.JKR_COEFFICIENT:.3f}) and "
+        "y = F_max/F_Kendall for a flat punch of radius a (Kendall: 2√π K a^1.5). The effective toughness "
+        "is K_eff/K_th = √(y∞/(3π²/4)) (paraboloid) and y∞ (punch). Campaigns: "
+        + ", ".join(f"[`{stem}`](../../campaigns/{stem}.toml)" for _, stem in LIMIT_CAMPAIGNS)
+        + " (their comments give every choice: preload, step, points).",
+        "",
+        "## Run",
+        "",
+        f"- this `make limit`: {wall / 60:.1f} min wall with `--jobs {jobs}`, {computed} runs computed now; "
+        f"the {len(points)} stored runs' own compute time adds up to {run_seconds / 60:.1f} min.",
+        f"- machine: {m['nproc']} cores, {m['cpu']}; load average {start_load:.1f} at the start and "
+        f"{m['load'][0]:.1f} at the end (shared machine: times are pessimistic).",
+        "- runs stored / in the campaign: " + ", ".join(
+            f"{g} {len(spec.runs) - pending[g]}/{len(spec.runs)}" for g, spec in specs.items()) + ".",
+    ]
+    if any(pending.values()):
+        lines += [f"- **incomplete**: {sum(pending.values())} runs are still pending. Finish with "
+                  "`make limit` (it resumes; the largest a_c/Δ cost most).", ""]
+    lines += ["", "## The limit per self term", "", md_table(summary_table(results)), "",
+              "y∞ is F_max/(K_th² R) extrapolated to Δ → 0 for the paraboloid and F_max/F_Kendall for the punch. "
+              "“step bound” is how much the sampled F_max can miss the top of the force curve (one step's rise "
+              "just before the pull-off, `tfm.analysis.step_sampling_bound`); “preload check” compares F_max at "
+              "a deeper preload with the main one at the same spacing. A p interval marked ≤ or ≥ reaches the "
+              f"search range {analysis.LIMIT_P_BOUNDS} and is open there.", ""]
+    lines += ["## What it means", ""]
+    para = [r for r in results if r.geometry == "paraboloid" and r.fit is not None]
+    summary = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "fits": []}
+    for r in results:
+        if r.fit is not None:
+            best, low, high, source = r.estimate
+            summary["fits"].append({"geometry": r.geometry, "self_term": r.self_term, "y_inf": best,
+                                    "y_inf_low": low, "y_inf_high": high, "source": source,
+                                    "fit_y_inf": [r.fit.y_inf_low, r.fit.y_inf, r.fit.y_inf_high], "p": r.fit.p,
+                                    "p_low": r.fit.p_low, "p_high": r.fit.p_high, "points": len(r.points),
+                                    "largest_ratio": r.largest_ratio, "k_ratio": list(r.k_ratio),
+                                    "preload_change": r.preload_change})
+    for r in para:
+        best, low, high, source = r.estimate
+        p_txt = f"p = {r.fit.p_text(2)}" if r.trend_found else "no trend the fit can pin (p interval open)"
+        lines.append(f"- paraboloid, self term {r.self_term:g}: c∞ = {best:.3f} [{low:.3f}, {high:.3f}] ({source}) "
+                     f"against JKR/LEFM {theory.JKR_COEFFICIENT:.3f} ({100 * (best / theory.JKR_COEFFICIENT - 1):+.1f} %) "
+                     f"and the paper's {theory.PAPER_COEFFICIENT:g} ({100 * (best / theory.PAPER_COEFFICIENT - 1):+.1f} %); "
+                     f"{p_txt}; points up to a_c/Δ = {r.largest_ratio:.0f}."
+                     + (" The JKR value lies inside the interval." if low <= theory.JKR_COEFFICIENT <= high else ""))
+    for r in results:
+        if r.geometry == "flat punch" and r.fit is not None:
+            best, low, high, source = r.estimate
+            lines.append(f"- flat punch, self term {r.self_term:g}: F_max/F_Kendall → {best:.3f} [{low:.3f}, {high:.3f}] "
+                         f"({source}); " + (f"p = {r.fit.p_text(2)}" if r.trend_found else
+                                            "the fit finds no trend beyond the scatter (p interval open)")
+                         + f"; points up to a/Δ = {r.largest_ratio:.0f}.")
+    paper_fit = next((r for r in para if abs(r.self_term - theory.PAPER_SELF_TERM) < 1e-9), None)
+    if paper_fit is not None:
+        v = verdict_76(paper_fit)
+        lines.append(f"- **The paper's 7.6** (self term {theory.PAPER_SELF_TERM:g}): {v}")
+        summary["verdict_76"] = v
+        summary["paper_self_term_c_inf"] = list(paper_fit.estimate)
+    same = same_constant(results)
+    if same:
+        lines += ["- **One lattice constant for both geometries?**"] + ["  " + s for s in same]
+    if not para:
+        lines.append("- no paraboloid fit yet (fewer than "
+                     f"{MIN_FIT_POINTS} points per self term).")
+    lines += ["", "![the continuum limit](limit.png)", "",
+              "Filled circles: the main preload; crosses: the deeper preload at the same spacing; squares at "
+              "Δ/a = 0: y∞ with its 95 % interval; bands: every curve of the 95 % confidence set.", "",
+              "## Every point", ""]
+    if len(points):
+        tab = points.sort_values(["geometry", "self_term", "ratio", "max_indent"])[
+            ["geometry", "self_term", "spacing", "ratio", "max_indent", "F_max", "y", "step_bound", "wall_time", "warnings"]]
+        tab = tab.assign(spacing=[fraction_text(s) for s in tab["spacing"]],
+                         step_bound=[f"{100 * b:.2f} %" for b in tab["step_bound"]])
+        lines += [md_table(tab.rename(columns={"ratio": "a/Δ", "y": "y (coefficient)", "wall_time": "run s"})), ""]
+    lines += ["## Reproduce", "", "```", "make limit JOBS=2      # tfm limit --jobs 2: runs, resumes, fits, writes this file",
+              "tfm limit --analyse-only   # refit and rewrite from the runs stored so far", "```", ""]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "REPORT.md").write_text("\n".join(lines) + "\n")
+    summary["pending"] = pending
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+    return summary
+
+
+def summary_line(out_dir: Path) -> str | None:
+    """One sentence for the paper report from ``results/limit/summary.json`` (None if absent)."""
+    try:
+        data = json.loads((Path(out_dir) / "summary.json").read_text())
+    except (OSError, ValueError):
+        return None
+    fit = next((f for f in data.get("fits", []) if f["geometry"] == "paraboloid"
+                and abs(f["self_term"] - theory.PAPER_SELF_TERM) < 1e-9), None)
+    if fit is None:
+        return None
+    return (f"Extrapolated to Δ → 0 ([Beyond the paper](../limit/REPORT.md): {fit['points']} spacings up to "
+            f"a_c/Δ = {fit['largest_ratio']:.0f}), the coefficient at self term {theory.PAPER_SELF_TERM:g} tends to "
+            f"{fit['y_inf']:.3f} [{fit['y_inf_low']:.3f}, {fit['y_inf_high']:.3f}] (95 %, {fit['source']}).")
+
+
+def main_limit(args) -> int:
+    from ..params import ParameterError
+    from .report import machine
+    from .run import load_spec_for, run_specs
+
+    if args.jobs < 1:
+        raise ParameterError(f"jobs: must be a whole number >= 1, got {args.jobs!r}")
+    if args.max_ratio is not None and not args.max_ratio > 0:
+        raise ParameterError(f"max-ratio: must be > 0, got {args.max_ratio!r}")
+    t0 = time.perf_counter()
+    start_load = machine()["load"][0]
+    results_dir = Path(args.results_dir)
+    specs = {geometry: load_spec_for(stem) for geometry, stem in LIMIT_CAMPAIGNS}
+    computed = 0
+    if not args.analyse_only:
+        todo = specs
+        if args.max_ratio is not None:
+            todo = {g: dataclasses.replace(s, runs=tuple(r for r in s.runs if spec_ratio(r.params) <= args.max_ratio * (1 + 1e-9)))
+                    for g, s in specs.items()}
+        done = run_specs(todo, args.jobs, results_dir, quiet=args.quiet)
+        computed = sum(n for _, n in done.values())
+    frames = [stored_points(g, spec, results_dir) for g, spec in specs.items()]
+    points = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()
+    results = fit_all(points) if len(points) else []
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if results:
+        plot_limit(results, out_dir / "limit.png")
+    wall = time.perf_counter() - t0
+    write_limit_report(out_dir, points, results, specs, wall, computed, args.jobs, start_load)
+    if not args.quiet and results:
+        from .report import md_table
+
+        print(md_table(summary_table(results)))
+    print(f"[tfm limit] wrote {out_dir / 'REPORT.md'} in {wall:.0f} s", file=sys.stderr)
+    return 0
