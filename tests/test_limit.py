@@ -152,3 +152,22 @@ def test_split_preloads_pairs_deep_runs_with_their_main_run():
     main, pairs = split_preloads(pts)
     assert len(main) == 2 and len(pairs) == 1
     assert pairs["change"].iloc[0] == pytest.approx(0.01)
+
+
+def test_tfm_limit_analyse_only_reports_pending_runs_without_running(tmp_path):
+    """`tfm limit --analyse-only` on empty results runs nothing and says what is missing."""
+    from tfm.cli import main
+
+    out = tmp_path / "limit"
+    assert main(["limit", "--analyse-only", "--results-dir", str(tmp_path / "results"), "--out", str(out), "-q"]) == 0
+    text = (out / "REPORT.md").read_text()
+    assert "incomplete" in text and "paraboloid 0/60" in text
+    assert not (tmp_path / "results").exists()
+
+
+def test_tfm_limit_refuses_bad_options(capsys):
+    from tfm.cli import main
+
+    assert main(["limit", "--jobs", "0", "--analyse-only"]) == 2
+    assert "jobs" in capsys.readouterr().err
+    assert main(["limit", "--max-ratio", "-1", "--analyse-only"]) == 2
