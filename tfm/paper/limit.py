@@ -213,6 +213,9 @@ def verdict_76(res: LimitResult) -> str:
     """What the limit at the paper's self term says about the paper's 7.6."""
     best, low, high, source = res.estimate
     c = theory.PAPER_COEFFICIENT
+    if not math.isfinite(best):
+        return ("no verdict yet: at the a_c/Δ reached the fit cannot pin p and the top octaves still drift, "
+                "so there is no limit estimate to set beside it.")
     lo, hi, spacing = paper_ratio_range()
     where = f"the paper's fit at Δ = {fraction_text(spacing)} spans a_c/Δ = {lo:.0f}–{hi:.0f} in our units"
     cross = res.fit.crossing(c) if res.trend_found else math.nan
@@ -244,7 +247,7 @@ def summary_table(results: list[LimitResult]) -> pd.DataFrame:
             "plateau (95 %)": (f"{r.level.mean:.3f} [{r.level.ci_low:.3f}, {r.level.ci_high:.3f}] "
                                f"(a/Δ ≥ {r.level.x_min:.0f}" + ("" if r.level.flat else ", still drifting")
                                + ")") if r.level else "—",
-            "K_eff/K_th (95 %)": f"{_interval(klo, k, khi)} ({r.estimate[3]})" if f else "—",
+            "K_eff/K_th (95 %)": f"{_interval(klo, k, khi)} ({r.estimate[3]})" if math.isfinite(k) else "—",
             "residual σ": f"{f.sigma:.3g}" if f else "—",
             "preload check: max |ΔF_max|": (f"{100 * r.preload_change:.2f} % ({len(r.pairs)} pairs)"
                                             if len(r.pairs) else "no pairs yet"),
@@ -261,6 +264,11 @@ def same_constant(results: list[LimitResult]) -> list[str]:
         if geometry != "paraboloid" or ("flat punch", st) not in by:
             continue
         a, b = r.k_ratio, by[("flat punch", st)].k_ratio
+        if not (math.isfinite(a[0]) and math.isfinite(b[0])):
+            out.append(f"- self term {st:g}: not yet comparable (no limit estimate for "
+                       + " and ".join(g for g, v in (("the paraboloid", a), ("the punch", b)) if not math.isfinite(v[0]))
+                       + ").")
+            continue
         overlap = a[1] <= b[2] and b[1] <= a[2]
         out.append(f"- self term {st:g}: K_eff/K_th = {_interval(a[1], a[0], a[2])} (paraboloid) and "
                    f"{_interval(b[1], b[0], b[2])} (flat punch): "
@@ -327,6 +335,10 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
                                     "preload_change": r.preload_change})
     for r in para:
         best, low, high, source = r.estimate
+        if not math.isfinite(best):
+            lines.append(f"- paraboloid, self term {r.self_term:g}: no limit estimate yet (the fit cannot pin p and "
+                         f"the top octaves still drift); points up to a_c/Δ = {r.largest_ratio:.0f}.")
+            continue
         p_txt = f"p = {r.fit.p_text(2)}" if r.trend_found else "no trend the fit can pin (p interval open)"
         lines.append(f"- paraboloid, self term {r.self_term:g}: c∞ = {best:.3f} [{low:.3f}, {high:.3f}] ({source}) "
                      f"against JKR/LEFM {theory.JKR_COEFFICIENT:.3f} ({100 * (best / theory.JKR_COEFFICIENT - 1):+.1f} %) "
@@ -336,6 +348,10 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
     for r in results:
         if r.geometry == "flat punch" and r.fit is not None:
             best, low, high, source = r.estimate
+            if not math.isfinite(best):
+                lines.append(f"- flat punch, self term {r.self_term:g}: no limit estimate yet (no trend the fit can "
+                             f"pin, yet the top octaves still drift); points up to a/Δ = {r.largest_ratio:.0f}.")
+                continue
             lines.append(f"- flat punch, self term {r.self_term:g}: F_max/F_Kendall → {best:.3f} [{low:.3f}, {high:.3f}] "
                          f"({source}); " + (f"p = {r.fit.p_text(2)}" if r.trend_found else
                                             "the fit finds no trend beyond the scatter (p interval open)")
