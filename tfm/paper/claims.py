@@ -66,6 +66,11 @@ class Finding:
     figure: Figure | None = None
 
 
+def _g(x: float) -> str:
+    """Compact number: 2e-5, not 2e-05."""
+    return f"{x:g}".replace("e-0", "e-").replace("e+0", "e+")
+
+
 def _yes(ok: bool, otherwise: str = "no") -> str:
     return "yes" if ok else otherwise
 
@@ -117,7 +122,7 @@ def claims_fig3(run) -> Finding:
     last_force, last_radius = float(live["force"].iloc[-1]), float(live["contact_radius"].iloc[-1])
     dmax = f"δ_max = {row['r_max_indent']:.4g}"
     out = Finding(numbers={"fig3_f_max": row["r_pull_off_force"], "fig3_jkr": f_jkr,
-                           "fig3_case": f"spacing {fraction_text(spacing)}, F_th = {f_th:g}"})
+                           "fig3_case": f"spacing {fraction_text(spacing)}, F_th = {_g(f_th)}"})
     out.claims = [
         Claim("Fig. 3", "unloading force below the loading force at every indentation", "yes", str(below),
               _yes(below)),
@@ -128,7 +133,7 @@ def claims_fig3(run) -> Finding:
         Claim("Fig. 3", "force and contact area drop to zero from a finite value", "yes",
               f"last step in contact: F = {last_force:.3g}, a = {last_radius:.3g}",
               _yes(last_force < 0 and last_radius > 0)),
-        Claim("Fig. 3", f"pull-off force, spacing {fraction_text(spacing)}, F_th = {f_th:g}, {dmax}", "(plot only)",
+        Claim("Fig. 3", f"pull-off force, spacing {fraction_text(spacing)}, F_th = {_g(f_th)}, {dmax}", "(plot only)",
               f"{row['r_pull_off_force']:.4g}; JKR with K_eff = F_th/Δ^1.5 = {k_eff:.4g}: {f_jkr:.4g} "
               f"(ratio {row['r_pull_off_force'] / f_jkr:.3f})", "n/a"),
     ]
