@@ -55,7 +55,7 @@ def parse_number(value: Any, name: str) -> float:
 
     A fraction is exactly two decimal numbers around one slash: "1//64", "1/6/4" and
     "1/" are refused, never read as some other number."""
-    if isinstance(value, bool) or type(value).__name__ == "bool_":
+    if isinstance(value, bool) or (type(value).__module__ == "numpy" and "bool" in type(value).__name__):
         raise ParameterError(f"{name}: expected a number, got a boolean {value!r}")
     if isinstance(value, numbers.Real):
         return float(value)
