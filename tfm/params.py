@@ -25,7 +25,6 @@ import numbers
 import re
 import warnings
 from dataclasses import dataclass, fields
-from fractions import Fraction
 from typing import Any, Callable, Mapping
 
 from .config import SCHEMA_VERSION

@@ -15,7 +15,6 @@ import os
 import sys
 import traceback
 import warnings
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
@@ -213,6 +212,7 @@ def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
     """Runs over a spawned process pool. A worker that dies fails its own run, with the
     cause; the pool is rebuilt and the other runs go on (those in flight are redone)."""
     import multiprocessing
+    from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
     workers = min(jobs, len(todo))
@@ -274,6 +274,8 @@ def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
 
 def _start_pool(ctx, workers: int, threads: int, started, runs):
     """A pool with its workers started; returns (pool, {pid: process}, {future: run})."""
+    from concurrent.futures import ProcessPoolExecutor
+
     # The workers start during the submits below, with NUMBA_NUM_THREADS already set,
     # so Numba starts only `threads` threads in each; the initializer sets it again.
     saved = os.environ.get("NUMBA_NUM_THREADS")
