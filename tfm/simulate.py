@@ -6,6 +6,7 @@ import warnings
 import numpy as np
 
 from .geometry import heights, make_layout
+from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
 from .params import Params
 from .results import RunResult, curve_frame, provenance, summarize
@@ -37,6 +38,9 @@ def simulate(p: Params | None = None, *, progress=None, **overrides) -> RunResul
         p = Params.from_dict(overrides) if overrides else Params()
     elif overrides:
         p = p.replace(**overrides)
+    notes = check(p)                   # refuses a meaningless or oversized run up front
+    for note in notes:
+        warnings.warn(f"run {p.run_id}: {note}", RunWarning, stacklevel=2)
     prov = provenance()
     prob, layout = build_problem(p)
     n_load = int(np.ceil(p.delta_max / p.step - 1e-9))
@@ -44,6 +48,7 @@ def simulate(p: Params | None = None, *, progress=None, **overrides) -> RunResul
     out = run_protocol(prob, p.delta_max, p.step, max_unload, progress=progress)
     curve = curve_frame(out.steps)
     summary = summarize(curve, out, p, layout.n, layout.shape[0] if layout.shape else None)
+    summary["warnings"] = "; ".join(filter(None, notes + [summary["warnings"]]))
     if summary["warnings"]:
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
     return RunResult(p, curve, summary, prov)
