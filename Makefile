@@ -31,7 +31,7 @@ paper:              ## every result of the paper: campaigns, figures, results/pa
 	$(PYTHON) -m tfm.paper --jobs $(JOBS)
 
 limit:              ## beyond the paper: continuum limit of the pull-off coefficient, results/limit/REPORT.md
-	$(PYTHON) -m tfm.cli limit --jobs $(JOBS)
+	$(PYTHON) -m tfm limit --jobs $(JOBS)
 
 clean:
 	rm -rf build dist *.egg-info .pytest_cache

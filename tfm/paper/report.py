@@ -6,6 +6,7 @@ the named constants of ``tfm.theory``; nothing is typed in by hand.
 from __future__ import annotations
 
 import datetime as _dt
+import json
 import math
 import os
 import platform
@@ -18,6 +19,9 @@ from .. import theory
 from ..analysis import fraction_text
 from .claims import Finding
 from .run import REPO
+
+# the timing of the last make paper that computed every run (kept when later runs only resume)
+FULL_RUN_RECORD = "last_full_run.json"
 
 # (figure key, section title, table to print), in the order of the report
 SECTIONS = (
@@ -49,6 +53,13 @@ def machine() -> dict:
         cores = os.cpu_count()
     return {"nproc": cores, "cpu": cpu, "host": platform.node(), "python": platform.python_version(),
             "load": load}
+
+
+def _read_json(path: Path) -> dict | None:
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
 
 
 def md_table(df: pd.DataFrame, floatfmt: str = ".4g") -> str:
@@ -198,16 +209,31 @@ def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], 
     if quick:
         lines += ["**QUICK MODE: every spacing and step doubled. These numbers check the pipeline, "
                   "not the paper.**", ""]
+    now = {"date": _dt.datetime.now().strftime("%Y-%m-%d %H:%M"), "wall": wall, "jobs": jobs, "runs": total_runs,
+           "run_seconds": run_seconds, "load_start": start_machine["load"][0], "load_end": m["load"][0],
+           "cpu": m["cpu"], "nproc": m["nproc"]}
+    record = path.with_name(FULL_RUN_RECORD)
+    if computed == total_runs and not quick:
+        record.write_text(json.dumps(now, indent=1) + "\n")
     lines += [
         "## Run",
         "",
-        f"- wall time of `make paper`: **{wall / 60:.1f} min** ({wall:.0f} s) with `--jobs {jobs}`, "
+        f"- wall time of this `make paper`: **{wall / 60:.1f} min** ({wall:.0f} s) with `--jobs {jobs}`, "
         f"{total_runs} runs in {len(runs)} campaigns, {computed} of them computed by this invocation "
         f"({'a full run from empty result folders' if computed == total_runs else 'the rest resumed from results/'}); "
         f"the runs' own compute time adds up to {run_seconds:.0f} s.",
         f"- machine: {m['nproc']} cores, {m['cpu']}, Python {m['python']}; load average "
         f"{start_machine['load'][0]:.1f} at the start and {m['load'][0]:.1f} at the end "
         "(a load above the core count means other work shared the machine and the time is pessimistic).",
+    ]
+    last = _read_json(record) if computed < total_runs else None
+    if last:
+        lines.append(
+            f"- the last full run from empty result folders ({last['date']}, `--jobs {last['jobs']}`, "
+            f"{last['runs']} runs): **{last['wall'] / 60:.1f} min** wall, the runs' own compute time "
+            f"{last['run_seconds']:.0f} s, load average {last['load_start']:.1f} at the start and "
+            f"{last['load_end']:.1f} at the end on {last['nproc']} cores.")
+    lines += [
         "- campaigns (results in `results/<name>/`; `make paper` again resumes and only analyses):",
         "",
         "| campaign | runs | computed now | wall time (s) | what |",
