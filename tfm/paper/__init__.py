@@ -14,7 +14,14 @@ fracture". Three steps, one module each:
 """
 from __future__ import annotations
 
-from .run import CAMPAIGNS
+
+def __getattr__(name):
+    # lazy: `tfm --help` registers `tfm paper` without loading pandas (tests/test_cli.py)
+    if name == "CAMPAIGNS":
+        from .run import CAMPAIGNS
+
+        return CAMPAIGNS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def main(argv=None) -> int:
