@@ -19,7 +19,12 @@ from ..config import NUMBA_OPTS, PARALLEL_OPTS
 from .compliance import offdiag
 
 CHUNK = 16               # 1-D transforms per pocketfft call (fixed: see the docstring)
-THREADED_SIZE = 192      # P from which the chunks are spread over threads (bench)
+CHUNKED_SIZE = 192       # P from which the transforms go in chunks (cache-friendly columns)
+# P from which the chunks are spread over threads. Every parallel stage ends in a barrier;
+# on a loaded machine a barrier can wait a scheduler slice (ms), so threads only pay on
+# large boxes (bench, shared 2-core VM: omp layer, 2 threads, P = 240 took 20 ms a
+# convolution against 0.7 ms on one).
+THREADED_SIZE = 512
 
 
 @njit(**NUMBA_OPTS)
@@ -110,13 +115,16 @@ def convolve(src, r0, r1, spec, out, sym):
 
     ``spec`` (W x (P//2 + 1) complex) and ``out`` (W x P) are work buffers. Small boxes
     take whole-array transforms (fewer calls; bench: faster below P ~ 200), large ones the
-    fixed chunks over threads (cache-friendly columns, every core). The choice depends on
-    P only, never on the thread count."""
+    fixed chunks (cache-friendly columns), over threads from THREADED_SIZE. The choice
+    depends on P only, and chunks give the same bits serial or threaded."""
     P = sym.shape[0]
-    if P >= THREADED_SIZE:
+    if P >= CHUNKED_SIZE:
         spec[:r0] = 0.0
         spec[r1:] = 0.0
-        _stages_parallel(src, r0, r1, spec, out, P, sym)
+        if P >= THREADED_SIZE:
+            _stages_parallel(src, r0, r1, spec, out, P, sym)
+        else:
+            _stages_serial(src, r0, r1, spec, out, P, sym)
         return
     W = out.shape[0]
     a = sfft.rfft(src[r0:r1], n=P, axis=1)
