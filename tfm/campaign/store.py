@@ -204,7 +204,9 @@ class CampaignStore:
             fails.append({"run_id": rid, **param_columns(by_id[rid].params),
                           "error": rec.get("error", ""), "traceback": rec.get("traceback", ""),
                           "host": rec.get("host", ""), "failed_at": rec.get("failed_at", "")})
-        extra = {"campaign": record}
+        from ..units import COLUMN_UNITS
+        # per row, p_units says which system applies (r_length_unit, r_force_unit too)
+        extra = {"campaign": record, "units": COLUMN_UNITS}
         summary_df = _typed_frame(rows, ["run_id", "status"] + param_names())
         curves_df = (pd.concat(curves, ignore_index=True) if curves
                      else pd.DataFrame({"run_id": pd.Series([], dtype=object)}))
