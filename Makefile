@@ -3,7 +3,7 @@ PYTHON ?= python3
 NAME ?=
 JOBS ?= $(shell nproc 2>/dev/null || echo 1)
 
-.PHONY: install test test-slow run bench paper campaign campaigns clean
+.PHONY: install test test-slow run bench validate rough paper campaign campaigns clean
 
 install:            ## install tfm and its test dependencies (editable)
 	$(PYTHON) -m pip install -q -e ".[test]"
@@ -19,6 +19,13 @@ run:                ## the main job on its embedded default: the paper's Fig. 3 
 
 bench:              ## operator and full-curve benchmarks (medians; prints the machine)
 	$(PYTHON) -m bench.run_bench
+
+validate:           ## tfm against ContactMechanics (non-adhesive rough contact); pip install -e ".[validate]"
+	$(PYTHON) -m bench.validate_contactmechanics
+
+rough:              ## the rough-sphere campaign, then its figure and table in results/rough/
+	tfm campaign run campaigns/rough_sphere.toml --jobs $(JOBS)
+	$(PYTHON) -m bench.rough_report
 
 campaign:           ## run campaigns/$(NAME).toml, e.g. make campaign NAME=smoke JOBS=2
 	@test -n "$(NAME)" || (echo "usage: make campaign NAME=<file stem>; see make campaigns"; exit 2)

@@ -261,3 +261,62 @@ def test_threshold_forces_carry_the_disorder():
     with pytest.raises(ParameterError, match="threshold_disorder: unknown value"):
         Params(threshold_disorder="gauss", disorder_width=0.1)
     assert Params.from_dict({"threshold_disorder": None}).threshold_disorder == "none"
+
+
+# ---- ensembles over seeds ----------------------------------------------------------------
+def _shoelace(x, y):
+    """Signed area of the closed polygon (x, y), counter-clockwise positive."""
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def test_hysteresis_is_the_loop_area():
+    import pandas as pd
+    from tfm.analysis import hysteresis
+    # load along P = d^2 to d = 1, unload along P = d^3 - 0.1 sin(pi d) past zero force
+    up = np.linspace(0, 1, 201)[1:]
+    down = np.linspace(1, -0.2, 241)[1:]
+    indent = np.concatenate([up, down])
+    force = np.concatenate([up ** 2, down ** 3 - 0.1 * np.sin(np.pi * down)])
+    force[-1] = 0.0
+    curve = pd.DataFrame({"indent": indent, "force": force})
+    path_x, path_y = np.concatenate([[0.0], indent]), np.concatenate([[0.0], force])
+    # the polygon closes along P = 0, which adds nothing to the integral of P d(delta);
+    # the path runs clockwise in (delta, P), so its signed area is minus the dissipation
+    assert hysteresis(curve) == pytest.approx(-_shoelace(path_x, path_y), rel=1e-12)
+
+
+def test_ensemble_stats_mean_and_spread_over_seeds():
+    import pandas as pd
+    from tfm.analysis import ensemble_stats
+    rows, curves = [], []
+    for rms in (1e-3, 2e-3):
+        for seed, po in enumerate((0.01, 0.012, 0.014)):
+            rid = f"{rms}-{seed}"
+            rows.append({"run_id": rid, "p_rms_height": rms, "p_roughness_seed": seed, "p_alpha": 0.75})
+            curves.append(pd.DataFrame({"run_id": rid, "indent": [0.1, 0.2, 0.1, 0.0],
+                                        "force": [1.0, 2.0, 0.0, -po * rms * 1000],
+                                        "contact_area": [0.1, 0.3, 0.2, 0.05]}))
+    stats = ensemble_stats(pd.DataFrame(rows), pd.concat(curves))
+    assert list(stats.columns[:2]) == ["p_rms_height", "n"]       # seeds and constants are not groups
+    r = stats.iloc[1]
+    assert r["n"] == 3
+    assert r["pull_off_force_mean"] == pytest.approx(0.024)
+    assert r["pull_off_force_std"] == pytest.approx(0.004)       # sample std, ddof = 1
+    assert r["area_at_max_load_mean"] == pytest.approx(0.3) and r["area_at_max_load_std"] == 0.0
+
+
+def test_rough_campaign_files_expand():
+    from tfm.campaign.spec import load_spec
+    sphere = load_spec("campaigns/rough_sphere.toml")
+    punch = load_spec("campaigns/rough_punch_area_load.toml")
+    assert len(sphere.runs) == 15 and len(punch.runs) == 6
+    assert {r.params.roughness_seed for r in sphere.runs} == {0, 1, 2}
+
+
+def test_rough_run_with_disorder_end_to_end():
+    import tfm
+    p = Params.from_dict(dict(ROUGH, threshold_disorder="weibull", disorder_width=0.3, max_indent=0.02,
+                              step=2e-3))
+    res = tfm.simulate(p)
+    assert res.summary["unload_complete"] and res.summary["pull_off_force"] > 0
+    assert res.curve["indent"].iloc[0] > 0 and res.curve["n_contact"].iloc[0] >= 1

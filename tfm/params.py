@@ -233,7 +233,12 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
             return value if value == "auto" else parse_number(value, key)
         if key == "k_th_coefficient":
             from .units import K_TH_COEFFICIENTS
-            return value if value in K_TH_COEFFICIENTS else parse_number(value, key)
+            if isinstance(value, str) and value not in K_TH_COEFFICIENTS:
+                try:
+                    return parse_number(value, key)
+                except ParameterError:
+                    return value            # an unknown name: the validation names the choices
+            return value
         if key in _INT_FIELDS:
             number = parse_number(value, key)
             if not number.is_integer():
