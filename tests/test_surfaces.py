@@ -320,3 +320,20 @@ def test_rough_run_with_disorder_end_to_end():
     res = tfm.simulate(p)
     assert res.summary["unload_complete"] and res.summary["pull_off_force"] > 0
     assert res.curve["indent"].iloc[0] > 0 and res.curve["n_contact"].iloc[0] >= 1
+
+
+def test_surface_topography_file_in_si_units(tmp_path):
+    """A map in a SurfaceTopography format (here NetCDF in micrometres) comes in with its
+    own pixel size and unit, converted to metres."""
+    st = pytest.importorskip("SurfaceTopography")
+    arr = np.random.default_rng(2).normal(size=(40, 40))                 # micrometres
+    st.Topography(arr, (40.0, 40.0), unit="um").to_netcdf(str(tmp_path / "t.nc"))
+    p = Params(units="si", youngs_modulus=1e6, poisson_ratio=0.5, f_th=0.0, shape="height_map",
+               height_map=str(tmp_path / "t.nc"), spacing=1e-6, max_indent=1e-7, step=1e-8)
+    lay = make_layout(p)
+    assert lay.shape == (39, 39)          # centre pixel 19, 19 pixels on its short side
+    x0 = heights(p, lay)
+    # the file stores its sizes in single precision: pixel = 1 um to 3e-8 relative, so the
+    # springs sit that close to the pixels and the heights match to about that
+    expect = arr[0:39, 0:39].ravel() * 1e-6
+    np.testing.assert_allclose(x0, expect - expect.max(), rtol=0, atol=1e-12)
