@@ -225,11 +225,13 @@ def test_bad_roughness_fails_early(changes, match):
         Params.from_dict({**ROUGH, **changes})
 
 
-def test_roughness_parameters_need_roughness():
-    with pytest.raises(ParameterError, match="roughness_seed: applies only to a rough surface"):
+def test_roughness_parameters_need_roughness(tmp_path):
+    with pytest.raises(ParameterError, match="roughness_seed: 3 has no effect .* the surface is rough"):
         Params(roughness_seed=3)
-    with pytest.raises(ParameterError, match="disorder_width: applies only with threshold_disorder"):
+    with pytest.raises(ParameterError, match="disorder_width: 0.1 has no effect .* threshold_disorder is"):
         Params(disorder_width=0.1)
+    with pytest.raises(ParameterError, match="radius: 2.0 has no effect .* shape is 'sphere'"):
+        Params(shape="height_map", height_map=_map(tmp_path), radius=2.0, f_th=0.0, max_indent=1e-3, step=1e-4)
 
 
 # ---- threshold disorder ----------------------------------------------------------------

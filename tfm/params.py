@@ -7,6 +7,12 @@ length L*, force F* = 2 pi G L*^2 / (1 - nu), so C_ij = 1/r_ij.
 The record's hash (with the result schema version) is the run id, so two runs with the
 same parameters are the same run. Bad values fail at construction with a message that
 names the parameter and the allowed range.
+
+Every parameter is used or refused: ``APPLIES`` (below) says, in one place, when each
+conditional parameter has an effect. A non-default value where it has none is a
+ParameterError; a default value given explicitly there (a CLI flag, a campaign key) is a
+named ParameterWarning. ``allow`` is the one field that is not hashed into the run id: it
+overrides the meaningful-run guards of ``tfm.guards`` and does not change any number.
 """
 from __future__ import annotations
 
@@ -15,9 +21,11 @@ import difflib
 import hashlib
 import json
 import math
+import numbers
+import re
+import warnings
 from dataclasses import dataclass, fields
-from fractions import Fraction
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from .config import SCHEMA_VERSION
 
@@ -35,20 +43,35 @@ class ParameterError(ValueError):
     """A run parameter is missing, malformed or outside its allowed range."""
 
 
+class ParameterWarning(UserWarning):
+    """A parameter was given where it has no effect (its default value, so harmless)."""
+
+
+_DECIMAL = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_FRACTION = re.compile(rf"^\s*({_DECIMAL})\s*/\s*({_DECIMAL})\s*$")
+
+
 def parse_number(value: Any, name: str) -> float:
-    """Accept floats, ints and fraction strings such as ``"1/64"``."""
-    if isinstance(value, bool):
+    """Accept numbers (NumPy scalars too) and strings such as ``"2e-5"`` or ``"1/64"``.
+
+    A fraction is exactly two decimal numbers around one slash: "1//64", "1/6/4" and
+    "1/" are refused, never read as some other number."""
+    if isinstance(value, bool) or (type(value).__module__ == "numpy" and "bool" in type(value).__name__):
         raise ParameterError(f"{name}: expected a number, got a boolean {value!r}")
-    if isinstance(value, (int, float)):
+    if isinstance(value, numbers.Real):
         return float(value)
     if isinstance(value, str):
         text = value.strip()
+        match = _FRACTION.match(text)
         try:
-            if "/" in text:
-                num, den = text.split("/", 1)
-                return float(Fraction(num.strip())) / float(Fraction(den.strip()))
-            return float(text)
-        except (ValueError, ZeroDivisionError):
+            if match:
+                num, den = (float(g) for g in match.groups())
+                if den == 0.0:
+                    raise ParameterError(f"{name}: cannot read {value!r} as a number (division by zero)")
+                return num / den
+            if "/" not in text and "_" not in text:
+                return float(text)
+        except ValueError:
             pass
     raise ParameterError(f"{name}: cannot read {value!r} as a number (use e.g. 0.5, 2e-5 or 1/64)")
 
@@ -118,9 +141,13 @@ class Params:
     work_of_adhesion: float | None = None  # gamma (J/m^2), units="si"
     k_th_coefficient: float | str = "paper"  # c in F_max = c K_th^2 R: a number or a name
 
+    # meaningful-run guards to override (tfm.guards.GUARDS), comma-separated; not hashed
+    allow: str = ""
+
     def __post_init__(self) -> None:
         if self.threshold_disorder is None:       # "none" in TOML and on the CLI reads as None
             object.__setattr__(self, "threshold_disorder", "none")
+        _normalize(self)
         _validate(self)
 
     # ---- derived quantities -------------------------------------------------
@@ -161,15 +188,16 @@ class Params:
         return dataclasses.asdict(self)
 
     def canonical_json(self) -> str:
-        # Fields added after the first schema are left out at their defaults, so runs
-        # stored before they existed keep their ids.
-        values = {k: v for k, v in self.to_dict().items()
-                  if not (k in _LATER_FIELDS and v == _LATER_FIELDS[k])}
-        return json.dumps(values, sort_keys=True, separators=(",", ":"))
+        return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
 
     @property
     def run_id(self) -> str:
-        text = f"schema={SCHEMA_VERSION};" + self.canonical_json()
+        """Hash of the parameters that change the numbers (all but ``NOT_HASHED``)."""
+        # fields added after the first schema are left out at their defaults, so runs
+        # stored before they existed keep their ids
+        values = {k: v for k, v in self.to_dict().items() if k not in NOT_HASHED
+                  and not (k in _LATER_FIELDS and v == _LATER_FIELDS[k])}
+        text = f"schema={SCHEMA_VERSION};" + json.dumps(values, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     @classmethod
@@ -193,9 +221,31 @@ class Params:
         if (clean.get("k_th") is not None or clean.get("units") == "si") and "f_th" not in clean:
             clean["f_th"] = None
         try:
-            return cls(**clean)
+            params = cls(**clean)
         except ParameterError as exc:
             raise ParameterError(f"{prefix}{exc}") from None
+        # a complete record (a stored one, read back) carries every default: no warnings
+        for name in (clean if set(clean) != set(names) else ()):
+            rule = APPLIES.get(name)
+            if rule is not None and not rule.applies(params) and not rule.also(params):
+                warnings.warn(f"{name}: given but has no effect; it applies only when {rule.when}",
+                              ParameterWarning, stacklevel=2)
+        return params
+
+    @classmethod
+    def from_row(cls, row: Mapping[str, Any], prefix: str = "p_") -> "Params":
+        """Rebuild the record from a table row (summary, failures, ``tfm campaign expand
+        --json``): the ``<prefix><name>`` columns, where a missing value (NaN, NA) of an
+        optional parameter is None. The run id is the stored one."""
+        values = {}
+        for name in cls.field_names():
+            if prefix + name not in row:
+                continue
+            value = row[prefix + name]
+            if _is_missing(value) and name in _OPTIONAL:
+                value = None
+            values[name] = value
+        return cls.from_dict(values, where="table row")
 
     def replace(self, **changes: Any) -> "Params":
         if changes.get("k_th") is not None and "f_th" not in changes:
@@ -214,21 +264,108 @@ _LATER_FIELDS = {f.name: f.default for f in fields(Params)
                                "work_of_adhesion", "k_th_coefficient")}
 
 
-_FLOAT_FIELDS = {"spacing", "alpha", "k_th", "f_th", "radius", "self_term", "c_w", "theta",
-                 "jitter", "step", "tol", "extent", "extent_margin",
-                 "hurst", "rms_slope", "rms_height", "short_cutoff", "long_cutoff", "rolloff",
-                 "map_pixel_size", "disorder_width", "youngs_modulus", "poisson_ratio",
-                 "work_of_adhesion"}
-_INT_FIELDS = {"neighbor_rings", "seed", "max_iter", "max_rounds", "max_unload_steps",
-               "roughness_seed", "disorder_seed"}
+NOT_HASHED = ("allow",)      # fields that change no number, so not part of the run id
+
+
+def _kind(annotation: str) -> str:
+    """float, int or str, from a field's annotation (a new field needs no list here)."""
+    return "float" if "float" in annotation else "int" if "int" in annotation else "str"
+
+
+_KINDS = {f.name: _kind(str(f.type)) for f in fields(Params)}
+_OPTIONAL = {f.name for f in fields(Params) if "None" in str(f.type)}
+_DEFAULTS = {f.name: f.default for f in fields(Params)}
+
+
+def _is_missing(value: Any) -> bool:
+    if value is None:
+        return True
+    if isinstance(value, float) and math.isnan(value):
+        return True
+    return type(value).__name__ in ("NAType", "NaTType")
+
+
+def _normalize(p: Params) -> None:
+    """NumPy scalars and ints in float fields become plain Python numbers, so equal
+    records have equal run ids (``radius=1`` and ``radius=np.float64(1.0)``)."""
+    for name, kind in _KINDS.items():
+        value = getattr(p, name)
+        if isinstance(value, bool) or value is None:
+            continue
+        if kind == "float" and isinstance(value, numbers.Real) and not isinstance(value, float):
+            object.__setattr__(p, name, float(value))
+        elif kind == "float" and isinstance(value, float) and type(value) is not float:
+            object.__setattr__(p, name, float(value))
+        elif kind == "int" and isinstance(value, numbers.Integral) and type(value) is not int:
+            object.__setattr__(p, name, int(value))
+    if isinstance(p.allow, str):
+        names = sorted({a.strip() for a in p.allow.split(",") if a.strip()})
+        object.__setattr__(p, "allow", ",".join(names))
+
+
+def _rough(p: Params) -> bool:
+    return p.rms_slope > 0 or p.rms_height > 0
+
+
+# ---- which parameters apply when: the one table ----------------------------------
+@dataclass(frozen=True)
+class Applies:
+    """When a conditional parameter has an effect. ``also`` lists values accepted where
+    it has none because they state the truth (alpha = 0 with an explicit f_th)."""
+
+    when: str
+    test: Callable[[Params], bool]
+    also: Callable[[Params], bool] = lambda p: False
+
+    def applies(self, p: Params) -> bool:
+        return self.test(p)
+
+
+# Policy: a non-default value where the parameter has no effect is a ParameterError; the
+# default value given explicitly there is a ParameterWarning (harmless, but probably not
+# what was meant). New conditional parameters add one line here.
+APPLIES: dict[str, Applies] = {
+    "alpha": Applies("k_th is given (F_th = k_th A^alpha); with an explicit f_th only alpha = 0 "
+                     "(no area dependence) is accepted", lambda p: p.k_th is not None,
+                     also=lambda p: p.alpha == 0.0),
+    "self_term": Applies("kernel is 'boussinesq' or 'neighbors' (the Winkler kernel uses c_w)",
+                         lambda p: p.kernel != "local"),
+    "neighbor_rings": Applies("kernel='neighbors'", lambda p: p.kernel == "neighbors"),
+    "c_w": Applies("kernel='local'", lambda p: p.kernel == "local"),
+    "theta": Applies("operator='tree'", lambda p: p.operator == "tree"),
+    "jitter": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
+    "seed": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
+    "extent_margin": Applies("extent is automatic (extent = none) and shape is not 'height_map'",
+                             lambda p: p.extent is None and p.shape != "height_map"),
+    # roughness, height maps, threshold disorder, units (tfm.surfaces, tfm.threshold, tfm.units)
+    **{name: Applies("the surface is rough (rms_slope or rms_height > 0)", lambda p: _rough(p))
+       for name in ("hurst", "short_cutoff", "long_cutoff", "rolloff", "roughness_seed")},
+    "radius": Applies("shape is 'sphere', 'paraboloid' or 'flat_punch'", lambda p: p.shape != "height_map"),
+    **{name: Applies("shape='height_map'", lambda p: p.shape == "height_map")
+       for name in ("height_map", "map_pixel_size", "height_map_hash")},
+    **{name: Applies("threshold_disorder is 'uniform' or 'weibull'", lambda p: p.threshold_disorder != "none")
+       for name in ("disorder_width", "disorder_seed")},
+    **{name: Applies("units='si' (paper units have E* = 1/pi)", lambda p: p.units == "si")
+       for name in ("youngs_modulus", "poisson_ratio", "work_of_adhesion")},
+    "k_th_coefficient": Applies("units='si' and work_of_adhesion is given",
+                                lambda p: p.units == "si" and p.work_of_adhesion is not None),
+}
+
+
+def _check_applies(p: Params) -> None:
+    for name, rule in APPLIES.items():
+        value = getattr(p, name)
+        if rule.applies(p) or value == _DEFAULTS[name] or rule.also(p):
+            continue
+        raise ParameterError(f"{name}: {value!r} has no effect here; it applies only when {rule.when} "
+                             f"(leave it at its default {_DEFAULTS[name]!r})")
 
 
 def _coerce(key: str, value: Any, prefix: str) -> Any:
     try:
         if value is None:
             return None
-        if key in _FLOAT_FIELDS:
-            return parse_number(value, key)
+        kind = _KINDS[key]
         if key == "max_indent":
             return value if value == "auto" else parse_number(value, key)
         if key == "k_th_coefficient":
@@ -239,7 +376,13 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
                 except ParameterError:
                     return value            # an unknown name: the validation names the choices
             return value
-        if key in _INT_FIELDS:
+        if key == "allow" and isinstance(value, (list, tuple)):
+            return ",".join(str(v) for v in value)
+        if kind == "float":
+            return parse_number(value, key)
+        if kind == "int":
+            if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+                return int(value)
             number = parse_number(value, key)
             if not number.is_integer():
                 raise ParameterError(f"{key}: expected a whole number, got {value!r}")
@@ -280,6 +423,12 @@ def _integer(name: str, value: Any, low: int, high: int | None = None) -> None:
 
 
 def _validate(p: Params) -> None:
+    from .guards import GUARDS
+
+    if not isinstance(p.allow, str):
+        raise ParameterError(f"allow: expected guard names separated by commas, got {p.allow!r}")
+    for name in filter(None, p.allow.split(",")):
+        _choice("allow", name, tuple(GUARDS))
     _positive("spacing", p.spacing, upper=1.0)
     a = _finite("alpha", p.alpha)
     if not -1.0 <= a <= 3.0:
@@ -343,29 +492,15 @@ def _validate(p: Params) -> None:
     if p.preconditioner in ("stencil", "fft") and p.layout != "square":
         raise ParameterError(f"preconditioner: {p.preconditioner!r} needs layout='square'; use 'auto' or 'none'")
     _validate_surface_relations(p)
+    _check_applies(p)
 
 
 # ---- roughness, height maps, threshold disorder (tfm.surfaces, tfm.threshold) ----
-_ROUGHNESS_FIELDS = ("hurst", "short_cutoff", "long_cutoff", "rolloff", "roughness_seed")
-_MAP_FIELDS = ("map_pixel_size", "height_map_hash")
-_DISORDER_FIELDS = ("disorder_width", "disorder_seed")
-_SI_FIELDS = ("youngs_modulus", "poisson_ratio", "work_of_adhesion")
+# (which of these parameters apply when: APPLIES above)
 #: largest coefficient of variation of the uniform disorder: keeps every F_th >= 0
 MAX_UNIFORM_WIDTH = 1.0 / math.sqrt(3.0)
-#: coefficient of variation of the Weibull disorder: modulus from about 0.58 to 100
+#: coefficient of variation of the Weibull disorder: Weibull modulus from 85 down to 0.54
 WEIBULL_WIDTH_RANGE = (0.015, 2.0)
-
-
-def _not_default(p: Params, name: str) -> bool:
-    return getattr(p, name) != _LATER_FIELDS[name]
-
-
-def _refuse_unless(p: Params, names, condition: bool, why: str) -> None:
-    if condition:
-        return
-    for name in names:
-        if _not_default(p, name):
-            raise ParameterError(f"{name}: applies only {why}; got {getattr(p, name)!r}")
 
 
 def _validate_surface(p: Params) -> None:
@@ -378,8 +513,7 @@ def _validate_surface(p: Params) -> None:
             raise ParameterError(f"{name}: must be >= 0 (0 = smooth), got {getattr(p, name)!r}")
     if p.rms_slope > 0 and p.rms_height > 0:
         raise ParameterError("rms_slope / rms_height: give one of them (the other sets itself), not both")
-    rough = p.rms_slope > 0 or p.rms_height > 0
-    _refuse_unless(p, _ROUGHNESS_FIELDS, rough, "to a rough surface (rms_slope or rms_height > 0)")
+    rough = _rough(p)
     for name in ("short_cutoff", "long_cutoff"):
         if getattr(p, name) is not None:
             _positive(name, getattr(p, name))
@@ -403,14 +537,11 @@ def _validate_surface(p: Params) -> None:
         raise ParameterError("height_map: shape='height_map' needs height_map = <path to a .npy map>")
     if not is_map and p.height_map is not None:
         raise ParameterError(f"height_map: applies only to shape='height_map'; got shape={p.shape!r}")
-    _refuse_unless(p, _MAP_FIELDS, is_map, "to shape='height_map'")
     if is_map:
         if p.map_pixel_size is not None:
             _positive("map_pixel_size", p.map_pixel_size)
         if p.max_indent == "auto":
             raise ParameterError("max_indent: 'auto' needs a sphere's JKR radius; give a number for a height map")
-        if p.radius != 1.0:
-            raise ParameterError(f"radius: does not apply to shape='height_map'; got {p.radius!r}")
         from .surfaces import MapError, load_height_map
         try:
             hm = load_height_map(p.height_map)
@@ -423,8 +554,6 @@ def _validate_surface(p: Params) -> None:
                                  f"was made (sha256 {hm.sha256[:12]}..., record {p.height_map_hash[:12]}...)")
     # threshold disorder
     _choice("threshold_disorder", p.threshold_disorder, DISORDERS)
-    _refuse_unless(p, _DISORDER_FIELDS, p.threshold_disorder != "none", "with threshold_disorder = "
-                   "'uniform' or 'weibull'")
     w = _finite("disorder_width", p.disorder_width)
     if p.threshold_disorder == "uniform" and not 0.0 < w <= MAX_UNIFORM_WIDTH:
         raise ParameterError(f"disorder_width: must be in (0, {MAX_UNIFORM_WIDTH:.4f}] for 'uniform' "
@@ -465,9 +594,7 @@ def _validate_units(p: Params) -> None:
     elif _finite("k_th_coefficient", coefficient) <= 0:
         raise ParameterError(f"k_th_coefficient: must be > 0 or a name (paper, jkr), got {coefficient!r}")
     if p.units == "paper":
-        _refuse_unless(p, _SI_FIELDS, False, "with units='si' (paper units have E* = 1/pi)")
-        _refuse_unless(p, ("k_th_coefficient",), False, "with units='si' and work_of_adhesion")
-        return
+        return                              # SI-only fields: APPLIES
     if p.youngs_modulus is None or p.poisson_ratio is None:
         raise ParameterError("youngs_modulus / poisson_ratio: units='si' needs both (Pa, and nu in (-1, 0.5])")
     _positive("youngs_modulus", p.youngs_modulus)
@@ -486,8 +613,6 @@ def _validate_units(p: Params) -> None:
         if p.alpha != 0.75:
             raise ParameterError(f"alpha: must be 0.75 with work_of_adhesion (K_th = pi sqrt(3 G gamma/"
                                  f"(c (1 - nu))) holds for F_th = K_th A^0.75), got {p.alpha!r}")
-    else:
-        _refuse_unless(p, ("k_th_coefficient",), False, "with work_of_adhesion")
     if p.kernel != "boussinesq":
         raise ParameterError(f"kernel: units='si' needs the elastic half-space kernel 'boussinesq' "
                              f"(the others are not elastic bodies with a modulus), got {p.kernel!r}")

@@ -6,6 +6,7 @@ import warnings
 import numpy as np
 
 from .geometry import heights, make_layout
+from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
 from .params import Params
 from .results import RunResult, curve_frame, provenance, summarize
@@ -41,6 +42,9 @@ def simulate(p: Params | None = None, *, progress=None, **overrides) -> RunResul
         p = Params.from_dict(overrides) if overrides else Params()
     elif overrides:
         p = p.replace(**overrides)
+    notes = check(p)                   # refuses a meaningless or oversized run up front
+    for note in notes:
+        warnings.warn(f"run {p.run_id}: {note}", RunWarning, stacklevel=2)
     prov = provenance()
     # an SI record is solved as its paper-units twin (tfm.units, L* = 1 m), then scaled back
     q = to_paper(p)
@@ -54,6 +58,7 @@ def simulate(p: Params | None = None, *, progress=None, **overrides) -> RunResul
         curve, summary = to_si_curve(curve, p), to_si_summary(summary, p)
     labels = unit_labels(p)
     summary["length_unit"], summary["force_unit"] = labels["length"], labels["force"]
+    summary["warnings"] = "; ".join(filter(None, notes + [summary["warnings"]]))
     if summary["warnings"]:
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
     return RunResult(p, curve, summary, prov)
