@@ -134,5 +134,36 @@ def _figure(summary, curves, stats, smooth, path):
     fig.savefig(path, dpi=110)
 
 
+
+def punch_table():
+    """Contact fraction at maximum load and the A(P) slope of the rough punch campaign."""
+    spec = load_spec("campaigns/rough_punch_area_load.toml")
+    summary = pd.read_parquet("results/rough_punch_area_load/summary.parquet")
+    curves = pd.read_parquet("results/rough_punch_area_load/curves.parquet")
+    p = spec.runs[0].params
+    nominal = math.pi * p.radius ** 2
+    stats = ensemble_stats(summary, curves, by=["p_k_th"])
+    # kappa = A E* h'_rms / P on the loading branch, below 10 % contact (the linear regime)
+    kappas = {}
+    for rid, c in curves.groupby("run_id"):
+        load = c[(c["phase"] == "load") & (c["force"] > 0) & (c["contact_area"] < 0.1 * nominal)]
+        kappas[rid] = float(np.median(load["contact_area"] * E_STAR * p.rms_slope / load["force"]))
+    summary["kappa"] = summary["run_id"].map(kappas)
+    kappa = summary.groupby("p_k_th")["kappa"].agg(["mean", "std"])
+    lines = ["| k_th | contact fraction at max load (mean ± std over 3 seeds) | pull-off force | "
+             "hysteresis | κ = A E* h'_rms / P below 10 % contact |", "|---|---|---|---|---|"]
+    for _, r in stats.iterrows():
+        k = kappa.loc[r["p_k_th"]]
+        lines.append(f"| {r['p_k_th']:g} | {r['area_at_max_load_mean'] / nominal:.3f} ± "
+                     f"{r['area_at_max_load_std'] / nominal:.3f} | {r['pull_off_force_mean']:.3g} ± "
+                     f"{r['pull_off_force_std']:.2g} | {r['hysteresis_mean']:.3g} ± {r['hysteresis_std']:.2g} "
+                     f"| {k['mean']:.2f} ± {k['std']:.2f} |")
+    text = "\n".join(lines)
+    (OUT / "rough_punch_table.md").write_text(text + "\n")
+    print(text)
+
+
 if __name__ == "__main__":
     main()
+    if Path("results/rough_punch_area_load/summary.parquet").exists():
+        punch_table()

@@ -35,6 +35,7 @@ from tfm.geometry import heights, make_layout
 from tfm.params import Params
 
 OUT = Path("results/rough")
+SKIPPED: list = []       # (shape, short cutoff, indent) where ContactMechanics did not converge
 
 
 def cases(spacing_inv: int):
@@ -71,9 +72,16 @@ def contact_mechanics_loading(p: Params, indents):
     forces, areas = [], []
     for delta in indents:
         res = constrained_conjugate_gradients(substrate, topo, offset=delta,
-                                              pentol=1e-6 * p.delta_max, maxiter=100000)
+                                              pentol=1e-6 * p.delta_max, maxiter=3000)
         if not res.success:
-            raise RuntimeError(f"ContactMechanics did not converge at indent {delta}: {res.message}")
+            # Seen at the rough sphere (cutoff 8 spacings) at indentations 0.0185-0.019: the
+            # Polonsky-Keer iteration stalls (penetration criterion), from a cold or a warm
+            # start and with looser tolerances. Such points are left out and listed.
+            print(f"  ContactMechanics: {res.message} at indent {delta:.4g}; point left out")
+            SKIPPED.append((p.shape, p.short_cutoff, float(delta)))
+            forces.append(math.nan)
+            areas.append(math.nan)
+            continue
         f = res.jac
         forces.append(float(f.sum()))
         areas.append(float((f > 0).sum()) * p.spacing ** 2)
@@ -114,11 +122,16 @@ def report(rows, curves, spacing_inv: int, out: Path):
              "| max abs area diff | area diff at max indent | springs in contact at max |",
              "|---|---|---|---|---|---|---|---|"]
     for (case, short), g in df.groupby(["case", "short_cutoff_spacings"], sort=False):
+        g = g[np.isfinite(g["force_cm"])]
         deep = g[g["indent"] >= 0.25 * g["indent"].max()]
         last = g.iloc[-1]
         lines.append(f"| {case} | {short or '-'} spacings | {g['indent'].min():.3g}-{g['indent'].max():.3g} "
                      f"| {np.abs(deep['force_diff']).max():.1%} | {last['force_diff']:+.1%} "
                      f"| {np.abs(deep['area_diff']).max():.1%} | {last['area_diff']:+.1%} | {last['n_contact']} |")
+    if SKIPPED:
+        lines += ["", "ContactMechanics did not converge (maxiter 3000) at: " +
+                  "; ".join(f"{shape}, short cutoff {sc:.4g}, indent {d:.4g}" for shape, sc, d in SKIPPED) +
+                  " (left out of the table)."]
     text = "\n".join(lines)
     cols = ["case", "short_cutoff_spacings", "indent", "force_tfm", "force_cm", "force_diff",
             "area_tfm", "area_cm", "area_diff", "n_contact"]
