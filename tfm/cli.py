@@ -174,7 +174,8 @@ def cmd_run(args) -> int:
     if not args.quiet:
         print(json.dumps({k: s[k] for k in ("pull_off_force", "pull_off_indent", "max_indent",
                                             "max_contact_radius", "n_steps", "n_solves",
-                                            "solver_iters", "wall_time")}, indent=1))
+                                            "solver_iters", "wall_time", "force_unit", "length_unit")},
+                         indent=1))
         print(f"wrote {out}" + ("" if plot_path is None else f" and {plot_path}"), file=sys.stderr)
     if s["warnings"]:
         print(f"WARNING: {s['warnings']}", file=sys.stderr)
