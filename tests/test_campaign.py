@@ -301,7 +301,7 @@ def test_result_does_not_depend_on_thread_count():
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("needs 2 Numba threads")
     p = Params.from_dict(dict(spacing="1/128", shape="paraboloid", k_th=0.02, radius=1.0,
-                              max_indent=0.05, step=0.01))
+                              max_indent=0.05, step=0.01, allow="step"))   # 5 steps: enough here
     outs = []
     before = numba.get_num_threads()
     try:

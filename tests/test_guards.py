@@ -166,14 +166,14 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, estimate_memory
                                     pytest.param(4.0, id="1025^2", marks=pytest.mark.slow)])
 def test_the_memory_estimate_bounds_the_measured_peak(extent):
     """Peak resident memory of a fresh process against the estimate: an upper bound, and
-    not more than 1.5x the peak (the runtime's ~250 MiB is most of it at these sizes;
-    at 1025^2 and 2049^2 the measured peaks were 477 and 1059 MiB, estimated 556 and 1280)."""
+    not more than 2x the peak (the runtime's 240-370 MiB is most of it at these sizes;
+    at 1025^2 and 2049^2 the measured peaks were 477 and 1059 MiB, estimated 623 and 1347)."""
     out = subprocess.run([sys.executable, "-c", MEASURE, str(extent)], capture_output=True, text=True,
                          cwd=REPO, env={"PYTHONPATH": str(REPO), "NUMBA_NUM_THREADS": "1",
                                         "PATH": "/usr/bin:/bin"}, timeout=300)
     assert out.returncode == 0, out.stderr
     peak, estimate = map(float, out.stdout.split())
-    assert peak <= estimate <= 1.5 * peak, (peak / 2 ** 20, estimate / 2 ** 20)
+    assert peak <= estimate <= 2.0 * peak, (peak / 2 ** 20, estimate / 2 ** 20)
 
 
 # ---- strict numbers ---------------------------------------------------------------------
