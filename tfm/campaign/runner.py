@@ -225,7 +225,8 @@ def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
     for _ in range(MAX_POOL_RESTARTS):
         if not remaining:
             return
-        pool, procs, futures = _start_pool(ctx, workers, threads, started, remaining.values())
+        pool, procs, futures = _start_pool(ctx, min(workers, len(remaining)), threads, started,
+                                           remaining.values())
         running: dict[int, str] = {}              # worker pid -> the run it said it took
         broken = False
         try:
