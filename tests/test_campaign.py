@@ -511,3 +511,21 @@ def test_a_killed_worker_fails_only_its_own_run(tmp_path):
     assert f"pid {killed}" in failures["error"].iloc[0] and "SIGKILL" in failures["error"].iloc[0]
     assert set(summary["run_id"]) | set(failures["run_id"]) == set(load_spec(path).run_ids)
     assert tfm_main(["campaign", "status", str(path), "--results-dir", str(tmp_path)]) == 1
+
+
+def test_the_pool_blames_the_run_whose_worker_died_and_finishes_the_rest():
+    """In process: one run kills its own worker mid-run; it fails with the cause, the
+    others (in flight on the other worker, or not yet started) finish in a rebuilt pool."""
+    from killers import KillsItsWorker
+
+    from tfm.campaign.runner import _run_pool
+    from tfm.campaign.spec import Run
+
+    good = load_spec(SMOKE).runs[:2]
+    killer = Run(index=9, params=KillsItsWorker())
+    outcomes = {run.run_id: outcome for run, outcome in _run_pool([killer, *good], jobs=2)}
+    assert set(outcomes) == {killer.run_id, *(r.run_id for r in good)}
+    assert "WorkerDied" in outcomes[killer.run_id].error and "SIGKILL" in outcomes[killer.run_id].error
+    for run in good:
+        assert outcomes[run.run_id].result is not None, outcomes[run.run_id].error
+        assert outcomes[run.run_id].result.params.run_id == run.run_id
