@@ -529,3 +529,11 @@ def test_the_pool_blames_the_run_whose_worker_died_and_finishes_the_rest():
     for run in good:
         assert outcomes[run.run_id].result is not None, outcomes[run.run_id].error
         assert outcomes[run.run_id].result.params.run_id == run.run_id
+
+
+@pytest.mark.parametrize("results_dir", ["/proc/tfm-results", "{tmp}/file/sub"])
+def test_an_unwritable_results_folder_is_refused_before_any_run(tmp_path, capsys, results_dir):
+    (tmp_path / "file").write_text("not a folder")
+    results_dir = results_dir.format(tmp=tmp_path)
+    assert tfm_main(["campaign", "run", str(SMOKE), "--results-dir", results_dir, "-q"]) == 2
+    assert "results-dir: cannot write the campaign folder" in capsys.readouterr().err
