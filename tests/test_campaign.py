@@ -537,3 +537,13 @@ def test_an_unwritable_results_folder_is_refused_before_any_run(tmp_path, capsys
     results_dir = results_dir.format(tmp=tmp_path)
     assert tfm_main(["campaign", "run", str(SMOKE), "--results-dir", results_dir, "-q"]) == 2
     assert "results-dir: cannot write the campaign folder" in capsys.readouterr().err
+
+
+def test_a_capped_auto_preload_is_said_before_a_campaign_runs(tmp_path, capsys):
+    spec = spec_from_dict({"name": "capped", "base": {"spacing": "1/64", "k_th": 0.05, "shape": "paraboloid",
+                                                      "radius": 0.05, "step": 1e-3}})
+    assert spec.runs[0].notes and "auto preload capped at 0.5 R" in spec.runs[0].notes[0]
+    root = run_campaign(spec, results_dir=tmp_path)
+    err = capsys.readouterr().err
+    assert err.index("auto preload capped") < err.index("campaign capped: 1 runs done")
+    assert load_tables(root)[0]["status"].tolist() == ["flagged"]

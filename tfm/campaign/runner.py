@@ -74,6 +74,13 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo and scheduler is None:
             _check_memory(spec, todo, min(jobs, len(todo)))
+        noted = [run for run in todo if run.notes]
+        if noted and not quiet:
+            for run in noted[:3]:
+                print(f"warning: campaign {spec.name}: run {run.index}: {'; '.join(run.notes)}", file=sys.stderr)
+            if len(noted) > 3:
+                print(f"warning: campaign {spec.name}: {len(noted) - 3} more runs with such notes "
+                      "(they are flagged in the summary)", file=sys.stderr)
         if todo:
             if scheduler is not None:
                 outcomes = _run_dask(todo, scheduler)

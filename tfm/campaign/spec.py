@@ -63,6 +63,7 @@ class Run:
     index: int
     params: Params
     swept: dict[str, Any] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()        # said before the run starts (tfm.guards.check)
 
     @property
     def run_id(self) -> str:
@@ -211,12 +212,12 @@ def _expand(base, sweep, zips, where):
                 for key in swept:
                     warnings.filterwarnings("ignore", message=f"{key}: given but", category=ParameterWarning)
                 params = Params.from_dict(values, where=label)
-            check(params, memory=False)
+            notes = tuple(check(params, memory=False))
         except GuardError as exc:
             raise CampaignError(f"{label}: {exc}") from None
         except ParameterError as exc:
             raise CampaignError(str(exc)) from None
-        yield Run(index=index, params=params, swept=swept)
+        yield Run(index=index, params=params, swept=swept, notes=notes)
 
 
 def _table(value: Any, label: str, where: str) -> dict[str, Any]:
