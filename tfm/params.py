@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import hashlib
 import json
 import math
@@ -157,7 +158,7 @@ class Params:
         from .threshold import mean_threshold
         return mean_threshold(self)
 
-    @property
+    @functools.cached_property           # a pure function of a frozen record
     def delta_max(self) -> float:
         """The preload depth, resolving ``max_indent="auto"``."""
         if self.max_indent == "auto":
@@ -185,12 +186,12 @@ class Params:
 
     # ---- (de)serialization ------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        return {name: getattr(self, name) for name in _NAMES}    # scalars and strings only
 
     def canonical_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
 
-    @property
+    @functools.cached_property
     def run_id(self) -> str:
         """Hash of the parameters that change the numbers (all but ``NOT_HASHED``)."""
         # fields added after the first schema are left out at their defaults, so runs
@@ -272,6 +273,7 @@ def _kind(annotation: str) -> str:
     return "float" if "float" in annotation else "int" if "int" in annotation else "str"
 
 
+_NAMES = tuple(f.name for f in fields(Params))
 _KINDS = {f.name: _kind(str(f.type)) for f in fields(Params)}
 _OPTIONAL = {f.name for f in fields(Params) if "None" in str(f.type)}
 _DEFAULTS = {f.name: f.default for f in fields(Params)}
@@ -290,13 +292,15 @@ def _normalize(p: Params) -> None:
     records have equal run ids (``radius=1`` and ``radius=np.float64(1.0)``)."""
     for name, kind in _KINDS.items():
         value = getattr(p, name)
-        if isinstance(value, bool) or value is None:
-            continue
-        if kind == "float" and isinstance(value, numbers.Real) and not isinstance(value, float):
+        t = type(value)
+        if t is float or t is str or t is bool or value is None:
+            continue                                   # the common case, kept cheap
+        if t is int:
+            if kind == "float":
+                object.__setattr__(p, name, float(value))
+        elif kind == "float" and isinstance(value, numbers.Real):
             object.__setattr__(p, name, float(value))
-        elif kind == "float" and isinstance(value, float) and type(value) is not float:
-            object.__setattr__(p, name, float(value))
-        elif kind == "int" and isinstance(value, numbers.Integral) and type(value) is not int:
+        elif kind == "int" and isinstance(value, numbers.Integral):
             object.__setattr__(p, name, int(value))
     if isinstance(p.allow, str):
         names = sorted({a.strip() for a in p.allow.split(",") if a.strip()})

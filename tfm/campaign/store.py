@@ -89,8 +89,13 @@ class CampaignStore:
         (the short wait covers a killed runner's children that are still exiting)."""
         import fcntl
 
-        self.root.mkdir(parents=True, exist_ok=True)
-        with open(self.root / ".lock", "a+") as fh:
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+            fh = open(self.root / ".lock", "a+")
+        except OSError as exc:                # before any run: say where, not a traceback
+            raise CampaignError(f"results-dir: cannot write the campaign folder {self.root}: "
+                                f"{exc.strerror or exc}") from None
+        with fh:
             deadline = time.monotonic() + wait
             while True:
                 try:
