@@ -15,16 +15,12 @@ import rocket_fft  # noqa: F401  (registers scipy.fft for Numba)
 import scipy.fft as sfft
 from numba import njit, prange
 
-from ..config import NUMBA_OPTS, PARALLEL_OPTS
+from ..config import FFT_THREADED_SIZE, NUMBA_OPTS, PARALLEL_OPTS
 from .compliance import offdiag
 
 CHUNK = 16               # 1-D transforms per pocketfft call (fixed: see the docstring)
 CHUNKED_SIZE = 192       # P from which the transforms go in chunks (cache-friendly columns)
-# P from which the chunks are spread over threads. Every parallel stage ends in a barrier;
-# on a loaded machine a barrier can wait a scheduler slice (ms), so threads only pay on
-# large boxes (bench, shared 2-core VM: omp layer, 2 threads, P = 240 took 20 ms a
-# convolution against 0.7 ms on one).
-THREADED_SIZE = 512
+THREADED_SIZE = FFT_THREADED_SIZE
 
 
 @njit(**NUMBA_OPTS)
