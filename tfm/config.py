@@ -20,6 +20,14 @@ STENCIL_RADIUS = 3
 DECISION_SLACK = 10.0
 
 
+# Box size P from which the compiled FFT spreads its fixed chunks over Numba threads.
+# Every parallel stage ends in a barrier; on a loaded machine a barrier waits a scheduler
+# slice (ms). Measured on the shared 2-core VM (omp layer, load ~5): 2 threads took
+# 20 ms a convolution at P = 240 against 0.7 ms on one, and 37 ms against 14 ms at
+# P = 625. So by default only the largest boxes (1/1024 grids) are threaded.
+FFT_THREADED_SIZE = int(os.environ.get("TFM_FFT_THREADED_SIZE", "1024"))
+
+
 def fft_workers() -> int:
     """Threads for scipy.fft; follows NUMBA_NUM_THREADS so campaign workers share cores."""
     value = os.environ.get("NUMBA_NUM_THREADS") or os.environ.get("OMP_NUM_THREADS")

@@ -73,7 +73,9 @@ class RunResult:
         return not self.summary["warnings"]
 
     def write_curve(self, path: str | os.PathLike) -> Path:
-        return write_table(self.curve, path, self.params, self.provenance, self.summary)
+        from .units import unit_labels
+        return write_table(self.curve, path, self.params, self.provenance, self.summary,
+                           extra={"units": unit_labels(self.params)})
 
 
 def curve_frame(steps) -> pd.DataFrame:

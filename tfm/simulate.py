@@ -12,6 +12,7 @@ from .params import Params
 from .results import RunResult, curve_frame, provenance, summarize
 from .solver import Problem, run_protocol
 from .threshold import threshold_forces
+from .units import to_paper, to_si_curve, to_si_summary, unit_labels
 
 
 class RunWarning(UserWarning):
@@ -25,7 +26,10 @@ def build_problem(p: Params) -> tuple[Problem, object]:
     check_positive_definite(p, spec, layout, symbol)
     op = make_operator(p, spec, layout, symbol)
     pre = make_preconditioner(p, spec, layout, symbol, op)
-    prob = Problem(x0=heights(p, layout), f_th=threshold_forces(p, layout.area), area=layout.area, edge=layout.edge,
+    # A height map is a finite body whose edge is the map's: contact there is physical,
+    # not a sign of a too-small grid.
+    edge = np.zeros_like(layout.edge) if p.shape == "height_map" else layout.edge
+    prob = Problem(x0=heights(p, layout), f_th=threshold_forces(p, layout.area), area=layout.area, edge=edge,
                    operator=op, precond=pre, tol=p.tol, max_iter=p.max_iter,
                    max_rounds=p.max_rounds, snap_rule=p.snap_rule)
     return prob, layout
@@ -42,12 +46,18 @@ def simulate(p: Params | None = None, *, progress=None, **overrides) -> RunResul
     for note in notes:
         warnings.warn(f"run {p.run_id}: {note}", RunWarning, stacklevel=2)
     prov = provenance()
-    prob, layout = build_problem(p)
-    n_load = int(np.ceil(p.delta_max / p.step - 1e-9))
-    max_unload = p.max_unload_steps or (20 * n_load + 1000)
-    out = run_protocol(prob, p.delta_max, p.step, max_unload, progress=progress)
+    # an SI record is solved as its paper-units twin (tfm.units, L* = 1 m), then scaled back
+    q = to_paper(p)
+    prob, layout = build_problem(q)
+    n_load = int(np.ceil(q.delta_max / q.step - 1e-9))
+    max_unload = q.max_unload_steps or (20 * n_load + 1000)
+    out = run_protocol(prob, q.delta_max, q.step, max_unload, progress=progress)
     curve = curve_frame(out.steps)
-    summary = summarize(curve, out, p, layout.n, layout.shape[0] if layout.shape else None)
+    summary = summarize(curve, out, q, layout.n, layout.shape[0] if layout.shape else None)
+    if p.units == "si":
+        curve, summary = to_si_curve(curve, p), to_si_summary(summary, p)
+    labels = unit_labels(p)
+    summary["length_unit"], summary["force_unit"] = labels["length"], labels["force"]
     summary["warnings"] = "; ".join(filter(None, notes + [summary["warnings"]]))
     if summary["warnings"]:
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
