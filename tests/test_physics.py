@@ -1,4 +1,4 @@
-"""Physics against analytical solutions (shared/PHYSICS.md)."""
+"""Physics against analytical solutions (docs/physics.md)."""
 import numpy as np
 import pytest
 

@@ -1,6 +1,6 @@
 """Regression tests on the paper's scaling exponents: the fast tier (CI, about a minute).
 
-Claims (Hulikal, Bhattacharya & Lapusta, Secs. 3-4; shared/PHYSICS.md):
+Claims (Hulikal, Bhattacharya & Lapusta, Secs. 3-4; docs/physics.md):
   F_max ~ K_th^2 and F_max ~ R (JKR), d ln F_max / d ln spacing = 4 alpha - 3 for the
   Boussinesq kernel, 4 alpha - 4 for the local (Winkler) kernel, whose alpha = 1 limit
   is exactly pi c_w K_th^2 R.
@@ -155,7 +155,7 @@ def test_local_kernel_alpha_075_does_not_converge():
     assert slope == pytest.approx(-1.0, abs=0.12)
 
 
-# ---- the paper campaigns preload deep enough (shared/PHYSICS.md, "Loading depth matters") --
+# ---- the paper campaigns preload deep enough (docs/physics.md, §6) --
 PAPER_CAMPAIGNS = sorted((Path(__file__).resolve().parents[1] / "campaigns").glob("paper_*.toml"))
 
 

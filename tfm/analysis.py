@@ -1,7 +1,7 @@
 """Fits, exponents and convergence measures for the paper's scaling claims.
 
 Hulikal, Bhattacharya & Lapusta, "A threshold-force model for adhesion and mode I
-fracture", Sec. 3-4 (see ``shared/PHYSICS.md``):
+fracture", Sec. 3-4 (see ``docs/physics.md``):
 
 - ``F_max ~ K_th^beta`` with beta = 2 and ``F_max ~ R^gamma`` with gamma = 1 (JKR);
 - ``F_max ~ spacing^(4 alpha - 3)`` for the Boussinesq kernel, so alpha = 0.75 converges;

@@ -1,6 +1,6 @@
 """Spring layouts and the undeformed surface heights x0.
 
-Sign convention (shared/PHYSICS.md): the apex is at height 0 and the surface lies below
+Sign convention (docs/physics.md, §3): the apex is at height 0 and the surface lies below
 it, x0 <= 0; the rigid flat is at height d, and indentation is delta = -d.
 """
 from __future__ import annotations

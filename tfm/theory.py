@@ -8,7 +8,7 @@
   F_max = (3 pi^2 / 4) K_IC^2 R (Maugis, J. Colloid Interface Sci. 150 (1992) 243).
 - Kendall flat punch: Kendall, J. Phys. D 4 (1971) 1186: F = sqrt(8 pi a^3 E* gamma).
 - Winkler (kernel="local", C_ii = c_w / A): F_max = pi c_w sigma_th^2 R for a paraboloid
-  preloaded deeper than c_w sigma_th (shared/PHYSICS.md).
+  preloaded deeper than c_w sigma_th (docs/physics.md).
 - The paper's own fit: F_max = 7.6 K_th^2 R at spacing 1/256 (Hulikal et al., Sec. 4).
 """
 from __future__ import annotations
@@ -128,5 +128,5 @@ def jkr_curve(k_ic, radius, a):
 
 def preload_is_deep(k_ic, radius, max_indent) -> bool:
     """Whether the Hertz radius at ``max_indent`` reaches the JKR critical radius
-    (shared/PHYSICS.md, "Loading depth matters")."""
+    (docs/physics.md, §6)."""
     return math.sqrt(radius * max_indent) >= jkr_critical_radius(k_ic, radius)

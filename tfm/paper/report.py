@@ -200,7 +200,7 @@ def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], 
         "paraboloid of",
         "radius R (the paper's sphere at the small depths where Hertz and JKR apply). Every F_max is",
         "quoted with its preload δ_max (see the tables), and every preload is deeper than the JKR",
-        "critical radius needs: sqrt(R δ_max) ≥ 1.2 a_c (shared/PHYSICS.md, “Loading depth matters”).",
+        "critical radius needs: sqrt(R δ_max) ≥ 1.2 a_c (docs/physics.md, §6).",
         "",
         "Beyond the paper: [the continuum limit of the pull-off coefficient](../limit/REPORT.md) "
         "(`make limit`).",
