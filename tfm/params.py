@@ -27,6 +27,8 @@ OPERATORS = ("fft", "direct", "tree")
 LAYOUTS = ("square", "hexagonal", "jittered")
 SNAP_RULES = ("batch", "single")
 PRECONDITIONERS = ("auto", "fft", "stencil", "diagonal", "none")
+CONTROLS = ("displacement", "force")
+SNAPSHOT_MODES = ("none", "events")
 
 
 class ParameterError(ValueError):
@@ -91,9 +93,16 @@ class Params:
     # grid extent (half-width of the square region holding the springs); None = auto
     extent: float | None = None
     extent_margin: float = 1.3          # auto extent = margin * Hertz radius + 4 spacings
+    # loading protocol (tfm.protocol) and field output (tfm.snapshots)
+    control: str = "displacement"       # "displacement" (the paper's runs) or "force"
+    max_load: float | None = None       # control="force": peak compressive load; None = Hertz load at max_indent
+    load_step: float | None = None      # control="force": load decrement; None = max_load / 100
+    snapshots: int | str = "none"       # "none", "events", or every k-th step (plus the events)
 
     def __post_init__(self) -> None:
+        _validate_protocol(self)       # first: delta_max may depend on max_load
         _validate(self)
+        _validate_protocol_relations(self)
 
     # ---- derived quantities -------------------------------------------------
     @property
@@ -103,8 +112,26 @@ class Params:
         return mean_threshold(self)
 
     @property
+    def peak_load(self) -> float:
+        """control="force": the peak compressive load, resolving ``max_load=None`` to the
+        Hertz load at ``delta_max``."""
+        if self.max_load is not None:
+            return float(self.max_load)
+        from .theory import hertz_force
+        return float(hertz_force(self.delta_max, self.radius))
+
+    @property
+    def load_decrement(self) -> float:
+        """control="force": the load step, resolving ``load_step=None``."""
+        return float(self.load_step) if self.load_step is not None else self.peak_load / 100.0
+
+    @property
     def delta_max(self) -> float:
-        """The preload depth, resolving ``max_indent="auto"``."""
+        """The preload depth, resolving ``max_indent="auto"`` (under force control with an
+        explicit max_load: the Hertz depth of that load, which sizes the grid)."""
+        if self.max_indent == "auto" and getattr(self, "max_load", None) is not None:
+            from .theory import hertz_indent
+            return float(hertz_indent(self.max_load, self.radius))
         if self.max_indent == "auto":
             from .theory import auto_max_indent
             return auto_max_indent(self)
@@ -165,11 +192,13 @@ class Params:
 
 
 _FLOAT_FIELDS = {"spacing", "alpha", "k_th", "f_th", "radius", "self_term", "c_w", "theta",
-                 "jitter", "step", "tol", "extent", "extent_margin"}
+                 "jitter", "step", "tol", "extent", "extent_margin", "max_load", "load_step"}
 _INT_FIELDS = {"neighbor_rings", "seed", "max_iter", "max_rounds", "max_unload_steps"}
 
 
 def _coerce(key: str, value: Any, prefix: str) -> Any:
+    if key == "snapshots":
+        return _coerce_snapshots(value, prefix)
     try:
         if value is None:
             return None
@@ -278,3 +307,51 @@ def _validate(p: Params) -> None:
                              "use operator='tree' or 'direct'")
     if p.preconditioner in ("stencil", "fft") and p.layout != "square":
         raise ParameterError(f"preconditioner: {p.preconditioner!r} needs layout='square'; use 'auto' or 'none'")
+
+
+def _coerce_snapshots(value: Any, prefix: str) -> Any:
+    """``snapshots``: "none" (also None), "events", or a whole number k given as int or text."""
+    if value is None:
+        return "none"
+    if isinstance(value, str) and value.strip().lower() in SNAPSHOT_MODES:
+        return value.strip().lower()
+    if isinstance(value, str):
+        try:
+            number = parse_number(value, "snapshots")
+        except ParameterError:
+            raise ParameterError(f"{prefix}snapshots: expected 'none', 'events' or a whole number k "
+                                 f"(every k-th step), got {value!r}") from None
+        return int(number) if number.is_integer() else number
+    return value
+
+
+def _validate_protocol(p: Params) -> None:
+    """The loading protocol and the field output (tfm.protocol, tfm.snapshots)."""
+    _choice("control", p.control, CONTROLS)
+    snaps = p.snapshots
+    if isinstance(snaps, str):
+        _choice("snapshots", snaps, SNAPSHOT_MODES)
+    else:
+        _integer("snapshots", snaps, 1)
+    if p.control == "displacement":
+        for name in ("max_load", "load_step"):
+            if getattr(p, name) is not None:
+                raise ParameterError(f"{name}: applies only to control='force' (got control='displacement'); "
+                                     "leave it unset or set control='force'")
+        return
+    if p.max_load is not None:
+        _positive("max_load", p.max_load)
+        if p.max_indent != "auto":
+            raise ParameterError("max_indent: under control='force' with an explicit max_load the preload "
+                                 "is a load; leave max_indent 'auto' (it then follows max_load)")
+    elif p.shape == "flat_punch":
+        raise ParameterError("max_load: control='force' on a flat punch needs an explicit max_load "
+                             "(there is no Hertz load to derive it from)")
+    if p.load_step is not None:
+        _positive("load_step", p.load_step)
+
+
+def _validate_protocol_relations(p: Params) -> None:
+    if p.control == "force" and p.load_step is not None:
+        if p.load_step > p.peak_load:
+            raise ParameterError(f"load_step: must be <= max_load ({p.peak_load:g}), got {p.load_step!r}")

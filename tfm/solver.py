@@ -140,6 +140,20 @@ class ContactState:
         self.u = u_guess if (u_guess is not None and stats.iters == 0) else op.apply(idx, Fc)
         return stats
 
+    def unit_response(self) -> np.ndarray:
+        """dF/dd on the current contact set: the solution of C_SS x = 1 on the set S,
+        zero elsewhere. F is linear in d while the set is fixed, so F(d') = F(d) + (d' - d) x."""
+        prob = self.prob
+        x = np.zeros_like(self.F)
+        idx = np.flatnonzero(self.contact)
+        if idx.size == 0:
+            return x
+        precond = None if prob.precond is None else (lambda r: prob.precond(idx, r))
+        xc, _ = pcg(lambda v: prob.operator.apply(idx, v, idx), np.ones(idx.size), np.zeros(idx.size),
+                    precond, prob.tol, prob.max_iter)
+        x[idx] = xc
+        return x
+
     def advance(self, d: float, k: int, phase: str, out: CurveResult) -> StepRecord:
         prob = self.prob
         guess, u_guess = self.F, None
