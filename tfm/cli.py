@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from .params import ParameterError, Params
+from .viewcli import register as register_views
 
 
 PARAM_HELP = {
@@ -71,9 +72,10 @@ def cmd_run(args) -> int:
         print(f"tfm run {p.run_id}: spacing={p.spacing:.6g} F_th={p.threshold_force:.4g} "
               f"R={p.radius:g} shape={p.shape} kernel={p.kernel} operator={p.operator} "
               f"max_indent={p.delta_max:.4g}", file=sys.stderr)
-    with warnings.catch_warnings():
+    from .progress import run_progress
+    with warnings.catch_warnings(), run_progress(p, quiet=args.quiet) as progress:
         warnings.simplefilter("ignore", RunWarning)
-        res = simulate(p)
+        res = simulate(p, progress=progress)
     res.write_curve(out)
     plot_path = out.with_suffix(".png")
     if not args.no_plot:
@@ -83,7 +85,8 @@ def cmd_run(args) -> int:
         print(json.dumps({k: s[k] for k in ("pull_off_force", "pull_off_indent", "max_indent",
                                             "max_contact_radius", "n_steps", "n_solves",
                                             "solver_iters", "wall_time")}, indent=1))
-        print(f"wrote {out}" + ("" if args.no_plot else f" and {plot_path}"), file=sys.stderr)
+        print(f"wrote {out}" + ("" if args.no_plot else f" and {plot_path}")
+              + (f" and {res.fields_path}" if res.fields_path else ""), file=sys.stderr)
     if s["warnings"]:
         print(f"WARNING: {s['warnings']}", file=sys.stderr)
         return 3
@@ -105,6 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=cmd_run)
     from .campaign.cli import register
     register(sub)
+    register_views(sub)
     return parser
 
 

@@ -86,8 +86,11 @@ class RunResult:
         if self.fields_path is not None:
             dest = fields_path_for(path)
             if Path(self.fields_path).resolve() != dest.resolve():
+                # through a temporary name in the destination folder: a kill leaves no half file
                 dest.parent.mkdir(parents=True, exist_ok=True)
-                shutil.move(str(self.fields_path), dest)
+                tmp = dest.with_name(f".{dest.name}.{os.getpid()}.tmp")
+                shutil.move(str(self.fields_path), tmp)
+                os.replace(tmp, dest)
                 self.fields_path = dest
             extra = {"fields": dest.name}
         return write_table(self.curve, path, self.params, self.provenance, self.summary, extra=extra)

@@ -236,6 +236,7 @@ class Fields:
             self.events = [e.decode() if isinstance(e, bytes) else str(e) for e in v["event"][...]]
         self.params = json.loads(self.attrs["params"])
         self.steps = np.sort(self._steps)
+        self._h5 = None
 
     def event_step(self, event: str) -> int | None:
         value = self.attrs.get(f"{event}_step")
@@ -250,12 +251,23 @@ class Fields:
 
     def snapshot(self, step: int) -> dict:
         """Arrays F, u, state (grid-shaped on the square grid) and d, force, n_contact, event."""
-        import h5netcdf
-
         i = self.position(step)
-        with h5netcdf.File(self.path, "r") as f:
-            v = f.variables
-            out = {name: v[name][i] for name in ("F", "u", "state")}
+        if self._h5 is None:
+            import h5py                     # plain h5py reads a slice ~50x faster than h5netcdf
+
+            self._h5 = h5py.File(self.path, "r")
+        out = {name: self._h5[name][i] for name in ("F", "u", "state")}
         out.update(step=int(step), d=float(self.d[i]), force=float(self.force[i]),
                    n_contact=int(self.n_contact[i]), event=self.events[i])
         return out
+
+    def close(self) -> None:
+        if self._h5 is not None:
+            self._h5.close()
+            self._h5 = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
