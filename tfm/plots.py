@@ -318,7 +318,7 @@ EVENT_TEXT = {"pull_off": "pull-off", "max_load": "maximum load", "first_snap": 
 def snapshot_title(snap) -> str:
     events = [EVENT_TEXT.get(e, "") for e in snap["event"].split(",") if e in EVENT_TEXT]
     ev = f" ({', '.join(events)})" if events else ""
-    return (f"step {snap['step']}{ev}: $\delta$ = {number(-snap['d'])}, $P$ = {number(snap['force'])}, "
+    return (f"step {snap['step']}{ev}: $\\delta$ = {number(-snap['d'])}, $P$ = {number(snap['force'])}, "
             f"{snap['n_contact']} springs in contact")
 
 
