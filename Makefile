@@ -15,7 +15,7 @@ test-slow:          ## paper-scale regression tests (minutes to hours)
 	$(PYTHON) -m pytest -q -m slow
 
 run:                ## the main job on its embedded default: the paper's Fig. 3 case
-	tfm run -o results/default/curve.parquet
+	tfm run --overwrite -o results/default/curve.parquet
 
 bench:              ## operator and full-curve benchmarks (medians; prints the machine)
 	$(PYTHON) -m bench.run_bench

@@ -68,7 +68,7 @@ def test_expansion_is_stable_and_zips_move_together():
     assert len(a.runs) == N_SMOKE == len(set(a.run_ids))
     assert [r.run_id for r in a.runs] == [r.params.run_id for r in a.runs]
     pairs = {(r.params.radius, r.params.max_indent) for r in a.runs}
-    assert pairs == {(0.5, 0.025), (1.0, 0.05), (2.0, 0.1)}        # zipped, not crossed
+    assert pairs == {(1.0, 0.05), (2.0, 0.1), (4.0, 0.2)}        # zipped, not crossed
     assert {r.params.alpha for r in a.runs} == {0.5, 0.75}
     assert all(r.params.spacing == 1 / 16 and r.params.f_th is None for r in a.runs)
 
@@ -88,7 +88,7 @@ def _write(tmp_path, text: str) -> Path:
     return path
 
 
-BASE = 'name = "bad"\n[base]\nspacing = "1/16"\nk_th = 0.02\nshape = "paraboloid"\nmax_indent = 0.025\n'
+BASE = 'name = "bad"\n[base]\nspacing = "1/32"\nk_th = 0.02\nshape = "paraboloid"\nmax_indent = 0.025\n'
 
 
 @pytest.mark.parametrize("text, expected", [
@@ -104,7 +104,7 @@ BASE = 'name = "bad"\n[base]\nspacing = "1/16"\nk_th = 0.02\nshape = "paraboloid
     (BASE + "[sweep]\nalpha = 0.5\n", ["[sweep] alpha", "needs a list"]),
     (BASE + "[sweep]\nalpha = []\n", ["[sweep] alpha", "empty list"]),
     (BASE + "[[zip]]\nradius = [0.5, 1.0]\nstep = [1e-3]\n", ["[[zip]] #1", "same length", "radius has 2"]),
-    (BASE + "[sweep]\nspacing = ['1/16', '1/32']\n", ["'spacing' is set in both [base] and [sweep]"]),
+    (BASE + "[sweep]\nspacing = ['1/32', '1/64']\n", ["'spacing' is set in both [base] and [sweep]"]),
     (BASE + "[sweep]\nradius = [0.5, 0.50]\n", ["run 1", "same run as run 0"]),
     (BASE + "[sweep\nalpha = [1]\n", ["not valid TOML"]),
 ])
@@ -145,9 +145,9 @@ def test_tables_have_expected_columns_and_rows(serial_run):
                 "prov_tfm_version", "prov_git_commit", "prov_numba_version", "prov_numpy_version",
                 "prov_host", "prov_started_at", "prov_numba_threads"):
         assert col in summary.columns, col
-    assert all(c in ("run_id", "status") or c.split("_", 1)[0] in ("p", "r", "prov") for c in summary.columns)
-    assert summary["p_max_indent"].tolist() == ["0.025", "0.05", "0.1"] * 2
-    assert summary["r_max_indent"].tolist() == [0.025, 0.05, 0.1] * 2
+    assert all(c in ("run_id", "status", "fields_path") or c.split("_", 1)[0] in ("p", "r", "prov") for c in summary.columns)
+    assert summary["p_max_indent"].tolist() == ["0.05", "0.1", "0.2"] * 2
+    assert summary["r_max_indent"].tolist() == [0.05, 0.1, 0.2] * 2
     assert (summary["r_pull_off_force"] > 0).all()
 
     assert list(curves.columns) == ["run_id"] + CURVE_COLUMNS
@@ -180,7 +180,7 @@ def test_runs_from_other_code_are_reported_stale_and_can_be_rerun(tmp_path, monk
     """The run id hashes parameters, not code: resume must say when stored runs came from
     another commit, and --rerun-stale must recompute them."""
     spec = spec_from_dict({"name": "stale", "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
-                                                     "max_indent": 0.02, "step": 2e-3},
+                                                     "max_indent": 0.05, "step": 5e-3},
                            "sweep": {"alpha": [0.5, 0.75]}}, source="stale")
     run_campaign(spec, quiet=True, results_dir=tmp_path)
     store = CampaignStore.for_spec(spec, tmp_path)
@@ -201,7 +201,7 @@ def test_runs_from_other_code_are_reported_stale_and_can_be_rerun(tmp_path, monk
 def test_progress_bar_is_quiet_with_quiet_and_in_ci(tmp_path, monkeypatch, capsys, ci, quiet, bar, line):
     monkeypatch.setenv("CI", ci)
     tiny = spec_from_dict({"name": "tiny", "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
-                                                    "radius": 0.5, "max_indent": 0.025, "step": 5e-3}})
+                                                    "radius": 1.0, "max_indent": 0.05, "step": 5e-3}})
     run_campaign(tiny, quiet=quiet, results_dir=tmp_path)
     err = capsys.readouterr().err
     assert ("1/1" in err) == bar, err                       # the bar counts runs: "1/1 [...]"
@@ -246,7 +246,8 @@ def test_a_failing_run_is_recorded_and_the_others_finish(tmp_path, monkeypatch, 
     assert failures["p_radius"].iloc[0] == victim.params.radius
     assert "FloatingPointError: injected failure" in failures["error"].iloc[0]
     assert "injected failure" in failures["traceback"].iloc[0] and "Traceback" in failures["traceback"].iloc[0]
-    assert tfm_main(["campaign", "status", "--results-dir", str(tmp_path), str(_toml_of(spec2, tmp_path))]) == 0
+    # status exits 1 while a run has failed
+    assert tfm_main(["campaign", "status", "--results-dir", str(tmp_path), str(_toml_of(spec2, tmp_path))]) == 1
     assert "1 failed" in capsys.readouterr().out
 
     # the failure is retried on the next run, and disappears once the run succeeds

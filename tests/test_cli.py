@@ -1,9 +1,21 @@
-"""`tfm run`: flags mirror parameters, fractions work, Parquet carries provenance."""
+"""`tfm run`: flags mirror parameters, fractions work, Parquet carries provenance; outputs
+are checked before the run; entry points; start-up loads no numerical engine."""
+import importlib
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
 import pandas as pd
+import pytest
 
 from tfm import Params
 from tfm.cli import main
 from tfm.results import read_metadata
+
+REPO = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(REPO)}
 
 
 def test_tfm_run_writes_curve_plot_and_metadata(tmp_path, capsys):
@@ -38,3 +50,135 @@ def test_tfm_run_flags_a_suspect_run_with_exit_3(tmp_path, capsys):
 def test_every_parameter_has_a_flag_with_help():
     from tfm.cli import PARAM_HELP
     assert set(PARAM_HELP) == set(Params.field_names())
+
+
+# ---- outputs are checked before any computation ------------------------------------
+SMALL = ["--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.02",
+         "--step", "1e-3", "-q"]
+
+
+@pytest.fixture
+def no_compute(monkeypatch):
+    """Fail the test if a run starts: the refusals below must come first."""
+    monkeypatch.setattr(importlib.import_module("tfm.simulate"), "build_problem",
+                        lambda p: pytest.fail("the run started before its outputs were checked"))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["-o", "{tmp}/curve.png"], "output: {tmp}/curve.png must end with .parquet"),
+    (["-o", "{tmp}/curve.csv"], "must end with .parquet"),
+    (["-o", "{tmp}/missing/curve.parquet"], "the folder {tmp}/missing does not exist"),
+    (["-o", "{tmp}/folder.parquet"], "is a folder"),
+    (["-o", "/proc/curve.parquet"], "cannot write in /proc"),
+    (["-o", "{tmp}/c.parquet", "--plot", "{tmp}/c.parquet"], "suffix|own path|must end"),
+    (["-o", "{tmp}/c.parquet", "--plot", "{tmp}/plot.txt"], "plot: .* must end with .png or .pdf or .svg"),
+    (["-o", "{tmp}/exists.parquet"], "exists; pass --overwrite"),
+    (["-o", "{tmp}/c.parquet", "--plot", "{tmp}/exists.png"], "plot: .*exists.png exists; pass --overwrite"),
+])
+def test_bad_outputs_are_refused_before_the_run(tmp_path, capsys, no_compute, args, message):
+    (tmp_path / "folder.parquet").mkdir()
+    (tmp_path / "exists.parquet").write_bytes(b"data")
+    (tmp_path / "exists.png").write_bytes(b"data")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    args = [a.format(tmp=tmp_path) for a in args]
+    assert main(["run", *SMALL, *args]) == 2
+    assert re.search(message.format(tmp=tmp_path), capsys.readouterr().err)
+    assert sorted(p.name for p in tmp_path.iterdir()) == before          # nothing written, no .tmp
+    assert (tmp_path / "exists.parquet").read_bytes() == b"data"
+
+
+def test_overwrite_replaces_and_the_plot_gets_its_own_path(tmp_path):
+    out = tmp_path / "c.parquet"
+    out.write_bytes(b"old")
+    assert main(["run", *SMALL, "-o", str(out), "--plot", str(tmp_path / "fig.pdf"), "--overwrite"]) == 0
+    assert read_metadata(out)["summary"]["pull_off_force"] > 0
+    assert (tmp_path / "fig.pdf").read_bytes()[:4] == b"%PDF"
+    assert not list(tmp_path.glob(".*"))
+
+
+def test_default_output_is_named_by_run_id_so_runs_do_not_clobber(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", *SMALL, "--no-plot"]) == 0
+    assert main(["run", *SMALL[:-1], "--alpha", "0.5", "-q", "--no-plot"]) == 0
+    runs = sorted((tmp_path / "results" / "runs").iterdir())
+    assert len(runs) == 2
+    for folder in runs:
+        assert read_metadata(folder / "curve.parquet")["run_id"] == folder.name
+    # the same run again is refused, not silently redone over the stored one
+    assert main(["run", *SMALL, "--no-plot"]) == 2
+    assert "exists; pass --overwrite" in capsys.readouterr().err
+
+
+def test_a_failed_write_leaves_no_temporary_file(tmp_path, monkeypatch):
+    import pyarrow.parquet as pq
+
+    def broken(table, where, **kw):
+        Path(where).write_bytes(b"PAR1 half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(pq, "write_table", broken)
+    with pytest.raises(OSError, match="No space"):
+        main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "--no-plot"])
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---- parameters and guards on the command line --------------------------------------
+def test_a_parameter_that_does_not_apply_exits_2_or_warns(tmp_path, capsys):
+    assert main(["run", *SMALL, "--alpha", "0.5", "--k-th", "none", "--f-th", "1e-5"]) == 2
+    assert "alpha: 0.5 has no effect here" in capsys.readouterr().err
+    assert main(["run", *SMALL, "--theta", "0.5", "--no-plot", "-o", str(tmp_path / "c.parquet")]) == 0
+    assert "tfm: warning: theta: given but has no effect; it applies only when operator='tree'" \
+        in capsys.readouterr().err
+
+
+def test_guards_refuse_on_the_command_line_and_allow_overrides(tmp_path, capsys, monkeypatch):
+    coarse = ["--spacing", "1/4", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.01",
+              "--step", "1e-3", "-q", "--no-plot"]
+    with monkeypatch.context() as m:
+        m.setattr(importlib.import_module("tfm.simulate"), "build_problem", lambda p: pytest.fail("ran"))
+        assert main(["run", *coarse, "-o", str(tmp_path / "a.parquet")]) == 2
+    assert "--allow coarse" in capsys.readouterr().err
+    assert main(["run", *coarse, "--allow", "coarse", "-o", str(tmp_path / "a.parquet")]) in (0, 3)
+    assert (tmp_path / "a.parquet").exists()
+
+
+def test_a_capped_auto_preload_is_stated_before_the_run_and_flags_it(tmp_path, capsys):
+    out = tmp_path / "c.parquet"
+    rc = main(["run", "--spacing", "1/64", "--radius", "0.05", "--k-th", "0.05", "--shape", "paraboloid",
+               "--step", "1e-3", "--no-plot", "-o", str(out)])
+    err = capsys.readouterr().err
+    header, note = err.index("tfm run "), err.index("auto preload capped at 0.5 R = 0.025")
+    assert header < note < err.index("wrote")                          # said before the run
+    assert rc == 3 and "capped" in read_metadata(out)["summary"]["warnings"]
+
+
+# ---- entry points and start-up time ---------------------------------------------------
+def test_version_and_python_m_tfm():
+    from tfm import __version__
+
+    for cmd in ([sys.executable, "-m", "tfm", "--version"], [sys.executable, "-m", "tfm.cli", "--version"]):
+        out = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO, env=ENV, timeout=60)
+        assert out.returncode == 0 and out.stdout.strip() == f"tfm {__version__}", out
+    out = subprocess.run([sys.executable, "-m", "tfm", "run", "--help"], capture_output=True, text=True,
+                         cwd=REPO, env=ENV, timeout=60)
+    assert out.returncode == 0 and "--overwrite" in out.stdout and "--allow" in out.stdout
+
+
+HEAVY = ("numba", "scipy", "pandas", "matplotlib")
+PROBE = """
+import sys
+from tfm.cli import main
+try:
+    code = main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+print("HEAVY", *[m for m in {heavy!r} if m in sys.modules])
+"""
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["campaign", "status", "campaigns/smoke.toml"]])
+def test_help_and_status_load_no_numerical_engine(argv, tmp_path):
+    argv = argv + (["--results-dir", str(tmp_path)] if "status" in argv else [])
+    out = subprocess.run([sys.executable, "-c", PROBE.format(heavy=HEAVY), *argv], capture_output=True,
+                         text=True, cwd=REPO, env=ENV, timeout=60)
+    assert out.stdout.splitlines()[-1] == "HEAVY", out.stdout[-300:] + out.stderr

@@ -57,8 +57,8 @@ def test_no_spring_in_contact_after_jump_off():
 
 
 @pytest.mark.parametrize("values, message", [
-    ({"max_load": 0.01}, "max_load: applies only to control='force'"),
-    ({"load_step": 1e-4}, "load_step: applies only to control='force'"),
+    ({"max_load": 0.01}, "max_load: 0.01 has no effect here; it applies only when control='force'"),
+    ({"load_step": 1e-4}, "load_step: 0.0001 has no effect here; it applies only when control='force'"),
     ({"control": "force", "max_load": -1}, "max_load: must be > 0"),
     ({"control": "force", "max_load": 0.01, "max_indent": 0.05}, "max_indent: under control='force'"),
     ({"control": "force", "shape": "flat_punch"}, "max_load: control='force' on a flat punch"),

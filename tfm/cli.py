@@ -4,9 +4,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 from pathlib import Path
 
+from . import __version__
 from .params import ParameterError, Params
 from .viewcli import register as register_views
 
@@ -37,55 +39,131 @@ PARAM_HELP = {
     "preconditioner": "auto | fft | stencil | diagonal | none",
     "extent": "grid half-width (default: from the Hertz radius at max_indent)",
     "extent_margin": "auto extent = margin * contact radius + 4 spacings",
+    "control": "displacement (the paper) | force: load to max_load, lower the load until jump-off",
+    "max_load": "control=force: peak compressive load (default: the Hertz load at max_indent)",
+    "load_step": "control=force: load increment and decrement (default max_load / 100)",
+    "snapshots": "field snapshots beside the table: none | events | K (every K-th step + events)",
+    "allow": "guards to override, comma-separated: coarse, step, tol, memory (docs/physics.md)",
 }
 
 
 def _add_param_flags(parser: argparse.ArgumentParser) -> None:
     """One flag per parameter, named like the field with dashes (--k-th, --max-indent)."""
-    defaults = Params()
-    for f in dataclasses.fields(Params):
+    for f in dataclasses.fields(Params):       # no Params(): --help must not load NumPy
         flag = "--" + f.name.replace("_", "-")
-        default = getattr(defaults, f.name)
+        default = f.default
         parser.add_argument(flag, dest=f.name, default=None, metavar="VALUE",
                             help=f"{PARAM_HELP.get(f.name, '')} (default: {default!r})")
 
 
 def _params_from_args(args) -> Params:
+    import warnings
+
+    from .params import ParameterWarning
+
     values = {}
     for name in Params.field_names():
         raw = getattr(args, name)
         if raw is None:
             continue
         values[name] = None if raw.lower() in ("none", "null") else raw
-    return Params.from_dict(values)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ParameterWarning)
+        p = Params.from_dict(values)
+    for w in caught:
+        print(f"tfm: warning: {w.message}", file=sys.stderr)
+    return p
+
+
+class OutputError(ParameterError):
+    """An output path that cannot be written, or would replace data, found before the run."""
+
+
+TABLE_SUFFIX = ".parquet"
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def default_output(p: Params) -> Path:
+    """Where `tfm run` writes without -o: one folder per run id, so runs never clobber."""
+    return Path("results") / "runs" / p.run_id / "curve.parquet"
+
+
+def check_output(path: Path, what: str, suffixes: tuple[str, ...], overwrite: bool, create: bool) -> None:
+    """Refuse, before any computation, an output that cannot be written or would replace
+    a file without ``--overwrite``. ``create`` makes a missing folder (default paths only)."""
+    if path.suffix.lower() not in suffixes:
+        raise OutputError(f"{what}: {path} must end with {' or '.join(suffixes)}")
+    if path.is_dir():
+        raise OutputError(f"{what}: {path} is a folder; give a file name such as {path / ('curve' + suffixes[0])}")
+    folder = path.parent
+    if create:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OutputError(f"{what}: cannot create the folder {folder}: {exc.strerror}") from None
+    if not folder.is_dir():
+        raise OutputError(f"{what}: the folder {folder} does not exist (create it first)")
+    if path.exists() and not overwrite:
+        raise OutputError(f"{what}: {path} exists; pass --overwrite to replace it")
+    probe = folder / f".{path.name}.{os.getpid()}.probe.tmp"
+    try:
+        probe.write_bytes(b"")
+    except OSError as exc:
+        raise OutputError(f"{what}: cannot write in {folder}: {exc.strerror}") from None
+    finally:
+        probe.unlink(missing_ok=True)
+
+
+def _plan_outputs(args, p: Params) -> tuple[Path, Path | None]:
+    out = Path(args.output) if args.output else default_output(p)
+    check_output(out, "output", (TABLE_SUFFIX,), args.overwrite, create=not args.output)
+    if args.no_plot:
+        return out, None
+    plot = Path(args.plot) if args.plot else out.with_suffix(".png")
+    if plot.resolve() == out.resolve():
+        raise OutputError(f"plot: {plot} is the table's own path; the plot needs a path of its own")
+    check_output(plot, "plot", PLOT_SUFFIXES, args.overwrite, create=False)
+    return out, plot
 
 
 def cmd_run(args) -> int:
     import warnings
 
-    from .plots import plot_curve
-    from .simulate import RunWarning, simulate
+    from .guards import check, estimate_memory
 
     p = _params_from_args(args)
-    out = Path(args.output)
+    notes = check(p)                      # refuses meaningless or oversized runs (exit 2)
+    out, plot_path = _plan_outputs(args, p)
     if not args.quiet:
         print(f"tfm run {p.run_id}: spacing={p.spacing:.6g} F_th={p.threshold_force:.4g} "
               f"R={p.radius:g} shape={p.shape} kernel={p.kernel} operator={p.operator} "
-              f"max_indent={p.delta_max:.4g}", file=sys.stderr)
+              f"max_indent={p.delta_max:.4g} ({p.delta_max / p.step:.0f} loading steps), "
+              f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
+    for note in notes:                    # stated before the run starts
+        print(f"tfm: warning: {note}", file=sys.stderr)
+
     from .progress import run_progress
+    from .simulate import RunWarning, simulate
+
     with warnings.catch_warnings(), run_progress(p, quiet=args.quiet) as progress:
         warnings.simplefilter("ignore", RunWarning)
         res = simulate(p, progress=progress)
     res.write_curve(out)
-    plot_path = out.with_suffix(".png")
-    if not args.no_plot:
-        plot_curve(res.curve, p, plot_path)
+    if plot_path is not None:
+        from .plots import plot_curve
+
+        tmp = plot_path.with_name(f".{plot_path.stem}.{os.getpid()}.tmp{plot_path.suffix}")
+        try:
+            plot_curve(res.curve, p, tmp)
+            os.replace(tmp, plot_path)
+        finally:
+            tmp.unlink(missing_ok=True)
     s = res.summary
     if not args.quiet:
         print(json.dumps({k: s[k] for k in ("pull_off_force", "pull_off_indent", "max_indent",
                                             "max_contact_radius", "n_steps", "n_solves",
                                             "solver_iters", "wall_time")}, indent=1))
-        print(f"wrote {out}" + ("" if args.no_plot else f" and {plot_path}")
+        print(f"wrote {out}" + ("" if plot_path is None else f" and {plot_path}")
               + (f" and {res.fields_path}" if res.fields_path else ""), file=sys.stderr)
     if s["warnings"]:
         print(f"WARNING: {s['warnings']}", file=sys.stderr)
@@ -95,14 +173,20 @@ def cmd_run(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tfm", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"tfm {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="one loading-unloading curve (default: the paper's Fig. 3 case)",
                          description="Run one curve. Flags mirror the parameter names; fractions "
-                                     "like 1/64 are accepted. Exit status 3 flags a suspect run "
-                                     "(grid edge reached, solver not converged).")
+                                     "like 1/64 are accepted. Outputs are checked before the run; "
+                                     "nothing is replaced without --overwrite. Exit status 2: bad "
+                                     "input or output; 3: a suspect run (grid edge reached, solver "
+                                     "not converged, auto preload capped).")
     _add_param_flags(run)
-    run.add_argument("-o", "--output", default="results/default/curve.parquet",
-                     help="curve table (Parquet); the plot goes beside it as .png")
+    run.add_argument("-o", "--output", default=None, metavar="FILE.parquet",
+                     help="curve table (default results/runs/<run_id>/curve.parquet)")
+    run.add_argument("--plot", default=None, metavar="FILE.png",
+                     help="the plot (.png, .pdf, .svg; default: beside the table, as .png)")
+    run.add_argument("--overwrite", action="store_true", help="replace existing output files")
     run.add_argument("--no-plot", action="store_true")
     run.add_argument("-q", "--quiet", action="store_true")
     run.set_defaults(func=cmd_run)

@@ -7,6 +7,12 @@ length L*, force F* = 2 pi G L*^2 / (1 - nu), so C_ij = 1/r_ij.
 The record's hash (with the result schema version) is the run id, so two runs with the
 same parameters are the same run. Bad values fail at construction with a message that
 names the parameter and the allowed range.
+
+Every parameter is used or refused: ``APPLIES`` (below) says, in one place, when each
+conditional parameter has an effect. A non-default value where it has none is a
+ParameterError; a default value given explicitly there (a CLI flag, a campaign key) is a
+named ParameterWarning. ``allow`` is the one field that is not hashed into the run id: it
+overrides the meaningful-run guards of ``tfm.guards`` and does not change any number.
 """
 from __future__ import annotations
 
@@ -15,9 +21,12 @@ import difflib
 import hashlib
 import json
 import math
+import numbers
+import re
+import warnings
 from dataclasses import dataclass, fields
 from fractions import Fraction
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from .config import SCHEMA_VERSION
 
@@ -35,20 +44,35 @@ class ParameterError(ValueError):
     """A run parameter is missing, malformed or outside its allowed range."""
 
 
+class ParameterWarning(UserWarning):
+    """A parameter was given where it has no effect (its default value, so harmless)."""
+
+
+_DECIMAL = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_FRACTION = re.compile(rf"^\s*({_DECIMAL})\s*/\s*({_DECIMAL})\s*$")
+
+
 def parse_number(value: Any, name: str) -> float:
-    """Accept floats, ints and fraction strings such as ``"1/64"``."""
-    if isinstance(value, bool):
+    """Accept numbers (NumPy scalars too) and strings such as ``"2e-5"`` or ``"1/64"``.
+
+    A fraction is exactly two decimal numbers around one slash: "1//64", "1/6/4" and
+    "1/" are refused, never read as some other number."""
+    if isinstance(value, bool) or (type(value).__module__ == "numpy" and "bool" in type(value).__name__):
         raise ParameterError(f"{name}: expected a number, got a boolean {value!r}")
-    if isinstance(value, (int, float)):
+    if isinstance(value, numbers.Real):
         return float(value)
     if isinstance(value, str):
         text = value.strip()
+        match = _FRACTION.match(text)
         try:
-            if "/" in text:
-                num, den = text.split("/", 1)
-                return float(Fraction(num.strip())) / float(Fraction(den.strip()))
-            return float(text)
-        except (ValueError, ZeroDivisionError):
+            if match:
+                num, den = (float(g) for g in match.groups())
+                if den == 0.0:
+                    raise ParameterError(f"{name}: cannot read {value!r} as a number (division by zero)")
+                return num / den
+            if "/" not in text and "_" not in text:
+                return float(text)
+        except ValueError:
             pass
     raise ParameterError(f"{name}: cannot read {value!r} as a number (use e.g. 0.5, 2e-5 or 1/64)")
 
@@ -98,9 +122,12 @@ class Params:
     max_load: float | None = None       # control="force": peak compressive load; None = Hertz load at max_indent
     load_step: float | None = None      # control="force": load decrement; None = max_load / 100
     snapshots: int | str = "none"       # "none", "events", or every k-th step (plus the events)
+    # meaningful-run guards to override (tfm.guards.GUARDS), comma-separated; not hashed
+    allow: str = ""
 
     def __post_init__(self) -> None:
-        _validate_protocol(self)       # first: delta_max may depend on max_load
+        _normalize(self)
+        _validate_protocol(self)       # before _validate: delta_max may depend on max_load
         _validate(self)
         _validate_protocol_relations(self)
 
@@ -158,7 +185,9 @@ class Params:
 
     @property
     def run_id(self) -> str:
-        text = f"schema={SCHEMA_VERSION};" + self.canonical_json()
+        """Hash of the parameters that change the numbers (all but ``NOT_HASHED``)."""
+        values = {k: v for k, v in self.to_dict().items() if k not in NOT_HASHED}
+        text = f"schema={SCHEMA_VERSION};" + json.dumps(values, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     @classmethod
@@ -181,9 +210,31 @@ class Params:
         if clean.get("k_th") is not None and "f_th" not in clean:
             clean["f_th"] = None
         try:
-            return cls(**clean)
+            params = cls(**clean)
         except ParameterError as exc:
             raise ParameterError(f"{prefix}{exc}") from None
+        # a complete record (a stored one, read back) carries every default: no warnings
+        for name in (clean if set(clean) != set(names) else ()):
+            rule = APPLIES.get(name)
+            if rule is not None and not rule.applies(params) and not rule.also(params):
+                warnings.warn(f"{name}: given but has no effect; it applies only when {rule.when}",
+                              ParameterWarning, stacklevel=2)
+        return params
+
+    @classmethod
+    def from_row(cls, row: Mapping[str, Any], prefix: str = "p_") -> "Params":
+        """Rebuild the record from a table row (summary, failures, ``tfm campaign expand
+        --json``): the ``<prefix><name>`` columns, where a missing value (NaN, NA) of an
+        optional parameter is None. The run id is the stored one."""
+        values = {}
+        for name in cls.field_names():
+            if prefix + name not in row:
+                continue
+            value = row[prefix + name]
+            if _is_missing(value) and name in _OPTIONAL:
+                value = None
+            values[name] = value
+        return cls.from_dict(values, where="table row")
 
     def replace(self, **changes: Any) -> "Params":
         if changes.get("k_th") is not None and "f_th" not in changes:
@@ -191,9 +242,86 @@ class Params:
         return dataclasses.replace(self, **changes)
 
 
-_FLOAT_FIELDS = {"spacing", "alpha", "k_th", "f_th", "radius", "self_term", "c_w", "theta",
-                 "jitter", "step", "tol", "extent", "extent_margin", "max_load", "load_step"}
-_INT_FIELDS = {"neighbor_rings", "seed", "max_iter", "max_rounds", "max_unload_steps"}
+NOT_HASHED = ("allow",)      # fields that change no number, so not part of the run id
+
+
+def _kind(annotation: str) -> str:
+    """float, int or str, from a field's annotation (a new field needs no list here)."""
+    return "float" if "float" in annotation else "int" if "int" in annotation else "str"
+
+
+_KINDS = {f.name: _kind(str(f.type)) for f in fields(Params)}
+_OPTIONAL = {f.name for f in fields(Params) if "None" in str(f.type)}
+_DEFAULTS = {f.name: f.default for f in fields(Params)}
+
+
+def _is_missing(value: Any) -> bool:
+    if value is None:
+        return True
+    if isinstance(value, float) and math.isnan(value):
+        return True
+    return type(value).__name__ in ("NAType", "NaTType")
+
+
+def _normalize(p: Params) -> None:
+    """NumPy scalars and ints in float fields become plain Python numbers, so equal
+    records have equal run ids (``radius=1`` and ``radius=np.float64(1.0)``)."""
+    for name, kind in _KINDS.items():
+        value = getattr(p, name)
+        if isinstance(value, bool) or value is None:
+            continue
+        if kind == "float" and isinstance(value, numbers.Real) and not isinstance(value, float):
+            object.__setattr__(p, name, float(value))
+        elif kind == "float" and isinstance(value, float) and type(value) is not float:
+            object.__setattr__(p, name, float(value))
+        elif kind == "int" and isinstance(value, numbers.Integral) and type(value) is not int:
+            object.__setattr__(p, name, int(value))
+    if isinstance(p.allow, str):
+        names = sorted({a.strip() for a in p.allow.split(",") if a.strip()})
+        object.__setattr__(p, "allow", ",".join(names))
+
+
+# ---- which parameters apply when: the one table ----------------------------------
+@dataclass(frozen=True)
+class Applies:
+    """When a conditional parameter has an effect. ``also`` lists values accepted where
+    it has none because they state the truth (alpha = 0 with an explicit f_th)."""
+
+    when: str
+    test: Callable[[Params], bool]
+    also: Callable[[Params], bool] = lambda p: False
+
+    def applies(self, p: Params) -> bool:
+        return self.test(p)
+
+
+# Policy: a non-default value where the parameter has no effect is a ParameterError; the
+# default value given explicitly there is a ParameterWarning (harmless, but probably not
+# what was meant). New conditional parameters add one line here.
+APPLIES: dict[str, Applies] = {
+    "alpha": Applies("k_th is given (F_th = k_th A^alpha); with an explicit f_th only alpha = 0 "
+                     "(no area dependence) is accepted", lambda p: p.k_th is not None,
+                     also=lambda p: p.alpha == 0.0),
+    "self_term": Applies("kernel is 'boussinesq' or 'neighbors' (the Winkler kernel uses c_w)",
+                         lambda p: p.kernel != "local"),
+    "neighbor_rings": Applies("kernel='neighbors'", lambda p: p.kernel == "neighbors"),
+    "c_w": Applies("kernel='local'", lambda p: p.kernel == "local"),
+    "theta": Applies("operator='tree'", lambda p: p.operator == "tree"),
+    "jitter": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
+    "seed": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
+    "extent_margin": Applies("extent is automatic (extent = none)", lambda p: p.extent is None),
+    "max_load": Applies("control='force'", lambda p: p.control == "force"),
+    "load_step": Applies("control='force'", lambda p: p.control == "force"),
+}
+
+
+def _check_applies(p: Params) -> None:
+    for name, rule in APPLIES.items():
+        value = getattr(p, name)
+        if rule.applies(p) or value == _DEFAULTS[name] or rule.also(p):
+            continue
+        raise ParameterError(f"{name}: {value!r} has no effect here; it applies only when {rule.when} "
+                             f"(leave it at its default {_DEFAULTS[name]!r})")
 
 
 def _coerce(key: str, value: Any, prefix: str) -> Any:
@@ -202,11 +330,16 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
     try:
         if value is None:
             return None
-        if key in _FLOAT_FIELDS:
-            return parse_number(value, key)
+        kind = _KINDS[key]
         if key == "max_indent":
             return value if value == "auto" else parse_number(value, key)
-        if key in _INT_FIELDS:
+        if key == "allow" and isinstance(value, (list, tuple)):
+            return ",".join(str(v) for v in value)
+        if kind == "float":
+            return parse_number(value, key)
+        if kind == "int":
+            if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+                return int(value)
             number = parse_number(value, key)
             if not number.is_integer():
                 raise ParameterError(f"{key}: expected a whole number, got {value!r}")
@@ -247,6 +380,12 @@ def _integer(name: str, value: Any, low: int, high: int | None = None) -> None:
 
 
 def _validate(p: Params) -> None:
+    from .guards import GUARDS
+
+    if not isinstance(p.allow, str):
+        raise ParameterError(f"allow: expected guard names separated by commas, got {p.allow!r}")
+    for name in filter(None, p.allow.split(",")):
+        _choice("allow", name, tuple(GUARDS))
     _positive("spacing", p.spacing, upper=1.0)
     a = _finite("alpha", p.alpha)
     if not -1.0 <= a <= 3.0:
@@ -307,6 +446,7 @@ def _validate(p: Params) -> None:
                              "use operator='tree' or 'direct'")
     if p.preconditioner in ("stencil", "fft") and p.layout != "square":
         raise ParameterError(f"preconditioner: {p.preconditioner!r} needs layout='square'; use 'auto' or 'none'")
+    _check_applies(p)
 
 
 def _coerce_snapshots(value: Any, prefix: str) -> Any:
@@ -334,11 +474,7 @@ def _validate_protocol(p: Params) -> None:
     else:
         _integer("snapshots", snaps, 1)
     if p.control == "displacement":
-        for name in ("max_load", "load_step"):
-            if getattr(p, name) is not None:
-                raise ParameterError(f"{name}: applies only to control='force' (got control='displacement'); "
-                                     "leave it unset or set control='force'")
-        return
+        return                          # max_load and load_step: see APPLIES
     if p.max_load is not None:
         _positive("max_load", p.max_load)
         if p.max_indent != "auto":

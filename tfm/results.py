@@ -17,11 +17,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import pandas as pd
-import pyarrow as pa
-import pyarrow.parquet as pq
-
 from .config import SCHEMA_VERSION
 from .params import Params
 
@@ -50,6 +45,7 @@ def git_commit() -> str | None:
 
 def provenance() -> dict[str, Any]:
     import numba
+    import numpy as np
     import scipy
     return {
         "tfm_version": tfm_version(),
@@ -103,6 +99,9 @@ def fields_path_for(curve_path: str | os.PathLike) -> Path:
 
 
 def curve_frame(steps) -> pd.DataFrame:
+    import numpy as np
+    import pandas as pd
+
     df = pd.DataFrame([s.__dict__ for s in steps])
     if df.empty:
         df = pd.DataFrame({c: [] for c in CURVE_COLUMNS})
@@ -114,6 +113,8 @@ def curve_frame(steps) -> pd.DataFrame:
 
 
 def summarize(curve: pd.DataFrame, out, p: Params, n_springs: int, grid_side: int | None) -> dict[str, Any]:
+    import numpy as np
+
     unload = curve[curve["phase"] == "unload"]
     tension = -curve["force"].to_numpy()
     k = int(np.argmax(tension)) if len(curve) else 0
@@ -161,9 +162,10 @@ def summarize(curve: pd.DataFrame, out, p: Params, n_springs: int, grid_side: in
 
 
 def _json_default(obj):
-    if isinstance(obj, (np.integer,)):
+    import numbers
+    if isinstance(obj, numbers.Integral):      # NumPy integers
         return int(obj)
-    if isinstance(obj, (np.floating,)):
+    if isinstance(obj, numbers.Real):
         return float(obj)
     return str(obj)
 
@@ -171,6 +173,9 @@ def _json_default(obj):
 def write_table(df: pd.DataFrame, path, params: Params | None = None, prov=None, summary=None,
                 extra: dict[str, Any] | None = None) -> Path:
     """Write a table atomically (temporary file, then rename) with tfm metadata."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     table = pa.Table.from_pandas(df, preserve_index=False)
@@ -188,13 +193,18 @@ def write_table(df: pd.DataFrame, path, params: Params | None = None, prov=None,
         meta[f"tfm.{key}".encode()] = json.dumps(value, sort_keys=True, default=_json_default).encode()
     table = table.replace_schema_metadata(meta)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    pq.write_table(table, tmp)
-    os.replace(tmp, path)
+    try:
+        pq.write_table(table, tmp)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)          # no stray temporary file, whatever happened
     return path
 
 
 def read_metadata(path) -> dict[str, Any]:
     """The tfm metadata of a Parquet file, decoded (params, provenance, summary, ...)."""
+    import pyarrow.parquet as pq
+
     meta = pq.read_schema(path).metadata or {}
     out = {}
     for key, value in meta.items():

@@ -4,6 +4,7 @@ from __future__ import annotations
 import warnings
 
 from .geometry import heights, make_layout
+from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
 from .params import Params
 from .results import RunResult, curve_frame, provenance, summarize
@@ -41,6 +42,9 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, **over
         p = Params.from_dict(overrides) if overrides else Params()
     elif overrides:
         p = p.replace(**overrides)
+    notes = check(p)                   # refuses a meaningless or oversized run up front
+    for note in notes:
+        warnings.warn(f"run {p.run_id}: {note}", RunWarning, stacklevel=2)
     prov = provenance()
     prob, layout = build_problem(p)
     writer = None
@@ -60,6 +64,7 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, **over
         out = protocol.run(p, prob, observe)
         curve = curve_frame(out.steps)
         summary = summarize(curve, out, p, layout.n, layout.shape[0] if layout.shape else None)
+        summary["warnings"] = "; ".join(filter(None, notes + [summary["warnings"]]))
         if writer is not None:
             writer.close(summary)
     except BaseException:

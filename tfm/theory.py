@@ -85,26 +85,38 @@ def neighbors_foundation_compliance(rings: int, self_term: float, spacing: float
     return spacing * (self_term + float((1.0 / r[mask]).sum()))
 
 
-def auto_max_indent(p) -> float:
+def auto_max_indent_uncapped(p) -> float:
     """A preload deep enough that unloading starts beyond the pull-off contact radius.
 
     Boussinesq: the Hertz radius sqrt(R delta) must exceed the JKR critical radius, so
     delta = (1.5 a_c)^2 / R. Winkler: delta must exceed c_w sigma_th; take twice that.
     A fixed number of neighbour rings acts as a Winkler foundation with the compliance of
-    ``neighbors_foundation_compliance``.
+    ``neighbors_foundation_compliance``. sigma_th = F_th / A with A the layout's spring
+    area (``tfm.threshold``, the threshold's one home). Never shallower than 10 steps.
     """
+    from .threshold import nominal_area
+
     f_th = p.threshold_force
-    sigma = f_th / p.spacing ** 2
+    area = nominal_area(p)
+    sigma = f_th / area
     if p.kernel == "local":
         delta = 2.0 * p.c_w * sigma
     elif p.kernel == "neighbors":
         delta = 2.0 * neighbors_foundation_compliance(p.neighbor_rings, p.self_term, p.spacing) * sigma
     else:
-        a_c = jkr_critical_radius(effective_toughness(f_th, p.spacing), p.radius)
+        # K_IC = sigma_th sqrt(spacing) on the square grid (effective_toughness); the
+        # layout's own area gives sigma_th
+        a_c = jkr_critical_radius(sigma * math.sqrt(p.spacing), p.radius)
         delta = (1.5 * a_c) ** 2 / p.radius
-    # never shallower than a few steps, never as deep as the sphere itself
-    delta = max(delta, 10.0 * p.step)
-    return min(delta, 0.5 * p.radius)
+    return max(delta, 10.0 * p.step)
+
+
+AUTO_PRELOAD_CAP = 0.5      # times R: never as deep as the sphere itself
+
+
+def auto_max_indent(p) -> float:
+    """``auto_max_indent_uncapped``, capped at 0.5 R (tfm.guards states the cap)."""
+    return min(auto_max_indent_uncapped(p), AUTO_PRELOAD_CAP * p.radius)
 
 
 def jkr_curve(k_ic, radius, a):

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pandas as pd
-
 from .runner import run_campaign
 from .spec import CampaignError, CampaignSpec, Run, load_spec, spec_from_dict
 from .store import CampaignStore, Status

@@ -30,10 +30,13 @@ def register(subparsers) -> None:
                      help="do not retry runs that failed before")
     run.add_argument("--rerun-stale", action="store_true",
                      help="recompute runs stored by another tfm version or git commit")
+    _max_runs_flag(run)
     run.set_defaults(func=cmd_run)
 
-    status = sub.add_parser("status", help="how many runs are done, pending and failed")
+    status = sub.add_parser("status", help="how many runs are done, pending and failed "
+                                           "(exit status 1 if any failed)")
     status.add_argument("file")
+    _max_runs_flag(status)
     status.add_argument("--results-dir", default="results")
     status.add_argument("-v", "--verbose", action="store_true", help="one line per run")
     status.set_defaults(func=cmd_status)
@@ -45,15 +48,21 @@ def register(subparsers) -> None:
 
     expand = sub.add_parser("expand", help="print the runs a campaign file expands to")
     expand.add_argument("file")
+    _max_runs_flag(expand)
     expand.add_argument("--json", action="store_true", help="one JSON object per run, all parameters")
     expand.set_defaults(func=cmd_expand)
+
+
+def _max_runs_flag(parser) -> None:
+    parser.add_argument("--max-runs", type=int, default=None, metavar="N",
+                        help="confirm a campaign of more than 10,000 runs (as max_runs = N in the file)")
 
 
 def cmd_run(args) -> int:
     from .runner import run_campaign
     from .store import CampaignStore
 
-    spec = load_spec(args.file)
+    spec = load_spec(args.file, max_runs=args.max_runs)
     root = run_campaign(spec, jobs=args.jobs, scheduler=args.scheduler, quiet=args.quiet,
                         results_dir=args.results_dir, retry_failed=not args.skip_failed,
                         rerun_stale=args.rerun_stale)
@@ -71,8 +80,12 @@ def cmd_run(args) -> int:
 def cmd_status(args) -> int:
     from .store import CampaignStore
 
-    spec = load_spec(args.file)
+    spec = load_spec(args.file, max_runs=args.max_runs)
     store = CampaignStore.for_spec(spec, args.results_dir)
+    conflict = store.source_conflict(spec)
+    if conflict:
+        print(f"tfm: error: {conflict}", file=sys.stderr)
+        return 2
     st = store.status(spec)
     print(f"{spec.name}: {st.total} runs: {len(st.done)} done ({len(st.flagged)} flagged), "
           f"{len(st.pending)} pending, {len(st.failed)} failed"
@@ -87,7 +100,7 @@ def cmd_status(args) -> int:
             if state[rid] == "failed":
                 line += f"  {(store.read_failure(rid) or {}).get('error', '')}"
             print(line)
-    return 0
+    return 1 if st.failed else 0
 
 
 def cmd_list(args) -> int:
@@ -109,7 +122,7 @@ def cmd_list(args) -> int:
 
 
 def cmd_expand(args) -> int:
-    spec = load_spec(args.file)
+    spec = load_spec(args.file, max_runs=args.max_runs)
     for run in spec.runs:
         if args.json:
             print(json.dumps({"index": run.index, "run_id": run.run_id, **run.params.to_dict()}))

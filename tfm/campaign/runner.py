@@ -62,6 +62,7 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
         raise CampaignError(f"jobs: must be a whole number >= 1, got {jobs!r}")
     store = CampaignStore.for_spec(spec, results_dir)
     with store.lock():
+        store.claim(spec)
         store.clean_temporary()
         status = store.status(spec)
         redo = set(status.pending) | (set(status.failed) if retry_failed else set())
@@ -73,6 +74,8 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
                       "by another tfm version or commit (see prov_git_commit); they are kept. "
                       "Use --rerun-stale to recompute them.", file=sys.stderr)
         todo = [run for run in spec.runs if run.run_id in redo]
+        if todo and scheduler is None:
+            _check_memory(spec, todo, min(jobs, len(todo)))
         if todo:
             if scheduler is not None:
                 outcomes = _run_dask(todo, scheduler)
@@ -83,6 +86,24 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
             _consume(spec, store, todo, outcomes, skipped=len(status.done), quiet=quiet)
         store.write_tables(spec)
     return store.root
+
+
+def _check_memory(spec, todo: list[Run], workers: int) -> None:
+    """Refuse, before any run starts, runs that cannot fit in this machine's memory when
+    ``workers`` of the largest run at once (unless their record allows 'memory')."""
+    from ..guards import available_memory, estimate_memory
+
+    have = available_memory()
+    big = max((r for r in todo if "memory" not in r.params.allow.split(",")),
+              key=lambda r: estimate_memory(r.params), default=None)
+    if have is None or big is None:
+        return
+    need = estimate_memory(big.params) * workers
+    if need > have:
+        raise CampaignError(f"{spec.source}: run {big.index} {big.run_id} needs about "
+                            f"{estimate_memory(big.params) / 2**30:.2f} GiB, {need / 2**30:.2f} GiB for "
+                            f"{workers} at once, but {have / 2**30:.2f} GiB is available. Use fewer --jobs, "
+                            "a coarser spacing, or allow = \"memory\" for these runs")
 
 
 def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped: int, quiet: bool) -> None:
@@ -155,39 +176,122 @@ def _run_serial(todo: list[Run]) -> Iterator[tuple[Run, Outcome]]:
         yield run, execute(run.params, "serial")
 
 
-def _pool_init(threads: int) -> None:
+_STARTED = None          # in a pool worker: the queue on which it says what it runs
+
+
+def _pool_init(threads: int, started=None) -> None:
+    global _STARTED
+    _STARTED = started
     _set_threads(threads)
 
 
+def _pool_execute(run_id: str, params, executor: str) -> Outcome:
+    """``execute`` in a pool worker, which first tells the parent which run it took, so
+    that a worker killed mid-run (out of memory, SIGKILL) costs that run only."""
+    if _STARTED is not None:
+        _STARTED.put((os.getpid(), run_id))
+    return execute(params, executor)
+
+
+def _death(exitcode) -> str:
+    """A worker's exit code in words."""
+    import signal
+
+    if exitcode is not None and exitcode < 0:
+        try:
+            name = signal.Signals(-exitcode).name
+        except ValueError:
+            name = f"signal {-exitcode}"
+        hint = " (the kernel's out-of-memory killer sends SIGKILL)" if name == "SIGKILL" else ""
+        return f"killed by {name}{hint}"
+    return f"exited with status {exitcode}"
+
+
+MAX_POOL_RESTARTS = 100     # each restart fails at least one run, or counts a strike against it
+
+
 def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
+    """Runs over a spawned process pool. A worker that dies fails its own run, with the
+    cause; the pool is rebuilt and the other runs go on (those in flight are redone)."""
     import multiprocessing
+    from concurrent.futures.process import BrokenProcessPool
 
     workers = min(jobs, len(todo))
     threads = threads_per_worker(workers)
     # spawn: a fresh interpreter per worker, safe with Numba's threads (fork is not).
+    ctx = multiprocessing.get_context("spawn")
+    started = ctx.SimpleQueue()
+    remaining = {run.run_id: run for run in todo}
+    strikes: dict[str, int] = {}
+    for _ in range(MAX_POOL_RESTARTS):
+        if not remaining:
+            return
+        pool, procs, futures = _start_pool(ctx, workers, threads, started, remaining.values())
+        running: dict[int, str] = {}              # worker pid -> the run it said it took
+        broken = False
+        try:
+            for fut in as_completed(futures):
+                run = futures[fut]
+                while not started.empty():        # keep the pipe drained
+                    pid, rid = started.get()
+                    running[pid] = rid
+                try:
+                    outcome = fut.result()
+                except BrokenProcessPool:
+                    broken = True
+                    break
+                except Exception as exc:
+                    outcome = _failure(exc)
+                del remaining[run.run_id]
+                yield run, outcome
+        finally:
+            if not broken:
+                pool.shutdown(wait=True, cancel_futures=True)
+        if not broken:
+            return
+        pool.shutdown(wait=True, cancel_futures=True)
+        while not started.empty():
+            pid, rid = started.get()
+            running[pid] = rid
+        for pid, proc in procs.items():
+            rid = running.get(pid)
+            if rid in remaining and proc.exitcode not in (0, -15, None):   # -15: the pool's SIGTERM
+                run = remaining.pop(rid)
+                yield run, Outcome(error=f"WorkerDied: the worker process (pid {pid}) running this "
+                                         f"run {_death(proc.exitcode)}",
+                                   traceback=f"worker pid {pid} {_death(proc.exitcode)} while running "
+                                             f"{rid}; the pool was rebuilt and the other runs went on")
+        # a death we could not pin on a run: every run that was in flight gets a strike,
+        # and one with two strikes fails, so a run that always kills its worker ends
+        for rid in set(running.values()) & set(remaining):
+            strikes[rid] = strikes.get(rid, 0) + 1
+            if strikes[rid] >= 2:
+                yield remaining.pop(rid), Outcome(
+                    error="WorkerDied: a worker process died twice while this run was in flight",
+                    traceback="the pool broke twice with this run in flight")
+    for run in list(remaining.values()):
+        yield run, Outcome(error="WorkerDied: the process pool kept breaking; not run")
+
+
+def _start_pool(ctx, workers: int, threads: int, started, runs):
+    """A pool with its workers started; returns (pool, {pid: process}, {future: run})."""
     # The workers start during the submits below, with NUMBA_NUM_THREADS already set,
     # so Numba starts only `threads` threads in each; the initializer sets it again.
-    ctx = multiprocessing.get_context("spawn")
     saved = os.environ.get("NUMBA_NUM_THREADS")
     os.environ["NUMBA_NUM_THREADS"] = str(threads)
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_pool_init,
-                               initargs=(threads,))
+                               initargs=(threads, started))
     try:
-        futures = {pool.submit(execute, run.params, f"pool[{workers}x{threads}]"): run for run in todo}
+        label = f"pool[{workers}x{threads}]"
+        futures = {pool.submit(_pool_execute, run.run_id, run.params, label): run for run in runs}
     finally:
         if saved is None:
             os.environ.pop("NUMBA_NUM_THREADS", None)
         else:
             os.environ["NUMBA_NUM_THREADS"] = saved
-    try:
-        for fut in as_completed(futures):
-            try:
-                outcome = fut.result()
-            except Exception as exc:          # the worker died (e.g. out of memory)
-                outcome = _failure(exc)
-            yield futures[fut], outcome
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    # the worker processes, to read their exit codes if the pool breaks
+    procs = dict(getattr(pool, "_processes", None) or {})
+    return pool, procs, futures
 
 
 def _execute_dask(params, host_threads: dict[str, int], client_pid: int) -> Outcome:

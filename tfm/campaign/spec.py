@@ -15,28 +15,39 @@ A campaign file names a study, fixes base parameters and sweeps the others::
 The runs are the product of the ``[sweep]`` axes (in file order) and the ``[[zip]]``
 groups (in file order); the last axis varies fastest. Every run is validated through
 ``Params.from_dict`` before anything runs, so a typo or a bad value fails at once with
-the file, the parameter and the reason. Optional parameters (``k_th``, ``f_th``,
+the file, the parameter and the reason; so is every meaningful-run guard of
+``tfm.guards`` (not the memory one: the file may run on another machine). A file that
+expands to more than ``DEFAULT_MAX_RUNS`` runs is refused, counted before anything is
+built, unless it says ``max_runs = N`` (or the CLI gets ``--max-runs N``). Optional parameters (``k_th``, ``f_th``,
 ``extent``, ``max_unload_steps``) take the string ``"none"`` for None, since TOML has
 no null.
 """
 from __future__ import annotations
 
 import difflib
+import hashlib
 import itertools
+import json
+import math
 import re
 import sys
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from ..params import ParameterError, Params
+from ..guards import GuardError, check
+from ..params import ParameterError, Params, ParameterWarning
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - python 3.10
     import tomli as tomllib
 
-TOP_LEVEL_KEYS = ("name", "description", "base", "sweep", "zip")
+TOP_LEVEL_KEYS = ("name", "description", "max_runs", "base", "sweep", "zip")
+# Expanding and validating costs ~0.1 ms a run, so 10,000 runs answer within seconds;
+# a larger campaign must say it means it (max_runs = N).
+DEFAULT_MAX_RUNS = 10_000
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 _NONE_WORDS = ("none", "null")
 
@@ -69,6 +80,8 @@ class CampaignSpec:
     zips: tuple[dict[str, list], ...]
     runs: tuple[Run, ...]
     source: str = "<dict>"
+    digest: str = ""            # sha256 of the parsed content (JSON, sorted keys)
+    origin: str = ""            # the file's resolved path ("" for a dict)
 
     @property
     def run_ids(self) -> list[str]:
@@ -79,22 +92,34 @@ class CampaignSpec:
         return list(self.sweep) + [k for group in self.zips for k in group]
 
 
-def load_spec(path: str | Path) -> CampaignSpec:
+def load_spec(path: str | Path, max_runs: int | None = None) -> CampaignSpec:
     """Read and validate a campaign file; raises CampaignError naming the file."""
     path = Path(path)
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise CampaignError(f"{path}: no such campaign file") from None
-    except tomllib.TOMLDecodeError as exc:
+    except OSError as exc:
+        raise CampaignError(f"{path}: cannot read the campaign file: {exc.strerror}") from None
+    try:
+        data = tomllib.loads(raw.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise CampaignError(f"{path}: not valid TOML: {exc}") from None
-    return spec_from_dict(data, source=str(path))
+    return spec_from_dict(data, source=str(path), max_runs=max_runs, _origin=str(path.resolve()))
 
 
-def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> CampaignSpec:
-    """Validate a campaign given as a mapping (the parsed TOML) and expand its runs."""
+def count_runs(sweep: Mapping[str, list], zips: list[Mapping[str, list]]) -> int:
+    """How many runs the axes expand to, without expanding them."""
+    return math.prod(len(v) for v in sweep.values()) * math.prod(len(next(iter(g.values()))) for g in zips)
+
+
+def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>", max_runs: int | None = None,
+                   _origin: str = "") -> CampaignSpec:
+    """Validate a campaign given as a mapping (the parsed TOML) and expand its runs.
+    ``max_runs`` confirms a campaign larger than ``DEFAULT_MAX_RUNS`` (as the key does)."""
     where = source
+    if not isinstance(data, Mapping):
+        raise CampaignError(f"{where}: expected a table of top-level keys, got {type(data).__name__}")
     for key in data:
         if key not in TOP_LEVEL_KEYS:
             raise CampaignError(f"{where}: unknown top-level key {key!r}{_hint(key, TOP_LEVEL_KEYS)}; "
@@ -126,6 +151,15 @@ def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Campai
             raise CampaignError(f"{where}: {label}: zipped lists must have the same length ({detail})")
         zips.append(group)
 
+    limit = max_runs if max_runs is not None else data.get("max_runs", DEFAULT_MAX_RUNS)
+    if isinstance(limit, bool) or not isinstance(limit, int) or limit < 1:
+        raise CampaignError(f"{where}: max_runs: expected a whole number >= 1, got {limit!r}")
+    count = count_runs(sweep, zips)
+    if count > limit:
+        raise CampaignError(f"{where}: expands to {count:,} runs, more than max_runs = {limit:,}. "
+                            f"If you mean it, set max_runs = {count} at the top of the file "
+                            f"(or pass --max-runs {count})")
+
     # each parameter is set in one place only
     seen: dict[str, str] = {}
     sections = [("[base]", base)] + [("[sweep]", sweep)] + [(f"[[zip]] #{g + 1}", z) for g, z in enumerate(zips)]
@@ -153,8 +187,10 @@ def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Campai
                                 f"{first.index} {_label(first.swept)} (equal parameters); "
                                 "remove the duplicate value")
         by_id[run.run_id] = run
+    # the content hash is of the parsed file, so comments and layout do not count
+    digest = hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()
     return CampaignSpec(name=name, description=description, base=dict(base), sweep=sweep,
-                        zips=tuple(zips), runs=runs, source=source)
+                        zips=tuple(zips), runs=runs, source=source, digest=digest, origin=_origin)
 
 
 def _expand(base, sweep, zips, where):
@@ -167,8 +203,17 @@ def _expand(base, sweep, zips, where):
         values = {**base, **swept}
         values = {k: (None if isinstance(v, str) and v.strip().lower() in _NONE_WORDS else v)
                   for k, v in values.items()}
+        label = f"{where}: run {index} {_label(swept)}".rstrip()
         try:
-            params = Params.from_dict(values, where=f"{where}: run {index} {_label(swept)}".rstrip())
+            with warnings.catch_warnings():
+                # a swept or zipped list gives every run a value: the default value there
+                # says "not used in this run", so only [base] keys warn
+                for key in swept:
+                    warnings.filterwarnings("ignore", message=f"{key}: given but", category=ParameterWarning)
+                params = Params.from_dict(values, where=label)
+            check(params, memory=False)
+        except GuardError as exc:
+            raise CampaignError(f"{label}: {exc}") from None
         except ParameterError as exc:
             raise CampaignError(str(exc)) from None
         yield Run(index=index, params=params, swept=swept)

@@ -10,6 +10,8 @@ Layout under ``<results_dir>/<campaign name>/``::
     summary.parquet            one row per finished run: run_id, status, p_*, r_*, prov_*
     curves.parquet             every step of every finished run, with run_id
     failures.parquet           one row per failed run: run_id, p_*, error, traceback
+    campaign.json              which campaign file made these results: its source, resolved
+                               path and sha256; another file with the same name is refused
     .lock                      held (flock) while a `tfm campaign run` works here
 
 Every file is written to a temporary name in the same folder and renamed into place,
@@ -29,9 +31,6 @@ import platform
 import time
 from pathlib import Path
 from typing import Any, Iterable, Iterator
-
-import pandas as pd
-import pyarrow.parquet as pq
 
 from ..params import Params
 from ..results import fields_path_for, git_commit, read_metadata, tfm_version, write_table
@@ -116,6 +115,38 @@ class CampaignStore:
                 fh.truncate(0)
                 fcntl.flock(fh, fcntl.LOCK_UN)
 
+    def source_record(self) -> dict[str, Any] | None:
+        try:
+            return json.loads((self.root / "campaign.json").read_text())
+        except (OSError, ValueError):
+            return None
+
+    def source_conflict(self, spec: CampaignSpec) -> str | None:
+        """Why ``spec`` may not write here, or None. The same file (edited: resume with
+        its new runs) or the same content (moved, copied) may; another file may not."""
+        rec = self.source_record()
+        if rec is None or rec.get("sha256") == spec.digest:
+            return None
+        if spec.origin and rec.get("origin") == spec.origin:
+            return None
+        if not spec.origin and not rec.get("origin") and rec.get("source") == spec.source:
+            return None
+        return (f"{self.root} holds the results of campaign {rec.get('source')!r} "
+                f"(sha256 {str(rec.get('sha256'))[:12]}...), and {spec.source!r} is another campaign with "
+                f"the same name {spec.name!r}. Give it its own name, or another --results-dir")
+
+    def claim(self, spec: CampaignSpec) -> None:
+        """Record which campaign file writes here (call with the lock held)."""
+        conflict = self.source_conflict(spec)
+        if conflict:
+            raise CampaignError(conflict)
+        record = {"name": spec.name, "source": spec.source, "origin": spec.origin, "sha256": spec.digest}
+        if self.source_record() != record:
+            path = self.root / "campaign.json"
+            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+            tmp.write_text(json.dumps(record, indent=1, sort_keys=True))
+            os.replace(tmp, path)
+
     def clean_temporary(self) -> list[Path]:
         """Remove temporary files left by a killed writer (call with the lock held)."""
         removed = []
@@ -198,6 +229,9 @@ class CampaignStore:
                   "failed": status.failed}
         if self._tables_current(record):
             return False
+        import pandas as pd
+        import pyarrow.parquet as pq
+
         by_id = {r.run_id: r for r in spec.runs}
         rows, curves = [], []
         for rid in status.done:
@@ -239,6 +273,8 @@ class CampaignStore:
             return False
 
     def load(self, table: str) -> pd.DataFrame:
+        import pandas as pd
+
         path = self.table_path(table)
         if not path.exists():
             raise FileNotFoundError(f"{path}: no such table; run the campaign first "
@@ -274,6 +310,8 @@ def param_columns(params: Params) -> dict[str, Any]:
 def _typed_frame(rows: list[dict[str, Any]], leading: Iterable[str]) -> pd.DataFrame:
     """A frame whose column types do not depend on the values: parameters typed from the
     record, ints that may be None as nullable Int64, strings as object."""
+    import pandas as pd
+
     leading = list(leading)
     columns = leading + [c for row in rows for c in row if c not in leading]
     columns = list(dict.fromkeys(columns))
