@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+import warnings
 from pathlib import Path
 
 EVENT_NAMES = ("pull_off", "max_load", "first_snap", "last_contact")
@@ -78,7 +79,9 @@ def load_run(path: Path):
     curve = pd.read_parquet(path)
     meta = read_metadata(path)
     try:
-        params = Params.from_dict(meta["params"]) if "params" in meta else None
+        with warnings.catch_warnings():          # a stored record is complete and was valid
+            warnings.simplefilter("ignore")
+            params = Params.from_dict(meta["params"]) if "params" in meta else None
     except (ParameterError, TypeError):
         params = None            # stored by another tfm version: draw without the caption
     fields = path.parent / meta["fields"] if meta.get("fields") else fields_path_for(path)
