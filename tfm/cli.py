@@ -117,6 +117,9 @@ def check_output(path: Path, what: str, suffixes: tuple[str, ...], overwrite: bo
 def _plan_outputs(args, p: Params) -> tuple[Path, Path | None]:
     out = Path(args.output) if args.output else default_output(p)
     check_output(out, "output", (TABLE_SUFFIX,), args.overwrite, create=not args.output)
+    if p.snapshots != "none":             # the field snapshots stream beside the table
+        from .results import fields_path_for
+        check_output(fields_path_for(out), "snapshots", (".nc",), args.overwrite, create=False)
     if args.no_plot:
         return out, None
     plot = Path(args.plot) if args.plot else out.with_suffix(".png")
@@ -147,7 +150,8 @@ def cmd_run(args) -> int:
 
     with warnings.catch_warnings(), run_progress(p, quiet=args.quiet) as progress:
         warnings.simplefilter("ignore", RunWarning)
-        res = simulate(p, progress=progress)
+        from .results import fields_path_for
+        res = simulate(p, progress=progress, fields_path=fields_path_for(out) if p.snapshots != "none" else None)
     res.write_curve(out)
     if plot_path is not None:
         from .plots import plot_curve

@@ -38,7 +38,7 @@ def cold_kernels() -> list[str]:
     Returns [] if the check itself is not possible (another Numba version)."""
     cold = []
     try:
-        for disp in _dispatchers():
+        for disp in {id(d): d for d in _dispatchers()}.values():
             cache = getattr(disp, "_cache", None)
             index = cache._cache_file._load_index() if hasattr(cache, "_cache_file") else {}
             if not index:
