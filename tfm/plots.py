@@ -55,6 +55,30 @@ def tidy_ticks(*axes, nbins=5):
             axis.set_major_formatter(fmt)
 
 
+def fraction_ticks(ax, spacings):
+    """Spacing ticks of a log axis as 1/64, 1/128 (and no minor ticks on that axis)."""
+    from matplotlib.ticker import NullLocator
+
+    ax.set_xticks(spacings, [spacing_text(s) for s in spacings])
+    ax.xaxis.set_minor_locator(NullLocator())
+
+
+def fold_x_offsets(fig):
+    """Move a linear x axis' common factor (×10⁻²) from below the right end of the axis,
+    where a long label runs into it, into the label itself."""
+    for ax in fig.axes:
+        axis = ax.xaxis
+        fmt = axis.get_major_formatter()
+        if axis.get_scale() != "linear" or not isinstance(fmt, ScalarFormatter) or not ax.get_xlabel():
+            continue
+        lo, hi = ax.get_xlim()
+        fmt.set_locs([t for t in axis.get_majorticklocs() if min(lo, hi) <= t <= max(lo, hi)])
+        offset = fmt.get_offset()
+        if offset and "(" + offset not in ax.get_xlabel():
+            ax.set_xlabel(f"{ax.get_xlabel()} ({offset})")
+            axis.get_offset_text().set_visible(False)
+
+
 def number(x, digits=3) -> str:
     """A number for a caption: 2×10⁻⁵ rather than 2e-05, 0.135 rather than 0.13500."""
     if x == 0 or not math.isfinite(x):
@@ -110,6 +134,7 @@ def reference_label(p) -> str | None:
 
 
 def _save(fig, path):
+    fold_x_offsets(fig)
     if path is not None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=DPI)
@@ -484,8 +509,7 @@ def plot_refinement(curves, radius, k_ic=None, path=None, title=None, zoom=True,
     lo, hi = float(fm.min()), float(fm.max())
     if hi / lo < 10:                      # show a near-constant series as near-constant
         ax3.set_ylim(lo / 3.0, hi * 3.0)
-    ax3.set_xticks(sp, [spacing_text(s) for s in sp])
-    ax3.minorticks_off()
+    fraction_ticks(ax3, sp)
     ax3.set_xlabel("spacing $\\Delta$")
     ax3.set_ylabel("$F_{max}$")
     ax3.legend(fontsize=6)
@@ -564,8 +588,7 @@ def plot_kernel_study(summary, slopes, crossings, path=None, title=None):
             ax.loglog(g["p_spacing"], g["r_pull_off_force"] / f0, "-", marker=markers.get(kernel, "o"), ms=3.5,
                       color=cmap(i / max(1, len(alphas) - 1)), label=f"$\\alpha$ = {alpha:g}")
         ax.axhline(1.0, color="0.6", lw=0.6)
-        ax.set_xticks(spacings, [spacing_text(s) for s in spacings])
-        ax.minorticks_off()
+        fraction_ticks(ax, spacings)
         ax.set_xlabel("spacing $\\Delta$")
         ax.set_ylabel("$F_{max}$ / $F_{max}$(coarsest)")
         ax.set_title(f"{kernel} kernel")
@@ -585,7 +608,7 @@ def plot_kernel_study(summary, slopes, crossings, path=None, title=None):
     ax2.set_xlabel("$\\alpha$")
     ax2.set_ylabel("d ln $F_{max}$ / d ln $\\Delta$")
     ax2.set_title("spacing slope; zero crossing = convergent $\\alpha$")
-    ax2.legend(fontsize=6, loc="upper left")
+    ax2.legend(fontsize=6, loc="lower right")
     tidy_ticks(ax2)
     letter(axes[:n])
     if title:
