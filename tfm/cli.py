@@ -133,6 +133,7 @@ def cmd_run(args) -> int:
     import warnings
 
     from .guards import check, estimate_memory
+    from .protocol import n_loading_steps
 
     p = _params_from_args(args)
     notes = check(p)                      # refuses meaningless or oversized runs (exit 2)
@@ -140,7 +141,7 @@ def cmd_run(args) -> int:
     if not args.quiet:
         print(f"tfm run {p.run_id}: spacing={p.spacing:.6g} F_th={p.threshold_force:.4g} "
               f"R={p.radius:g} shape={p.shape} kernel={p.kernel} operator={p.operator} "
-              f"max_indent={p.delta_max:.4g} ({p.delta_max / p.step:.0f} loading steps), "
+              f"max_indent={p.delta_max:.4g} ({n_loading_steps(p)} loading steps), "
               f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
     for note in notes:                    # stated before the run starts
         print(f"tfm: warning: {note}", file=sys.stderr)
@@ -164,8 +165,9 @@ def cmd_run(args) -> int:
             tmp.unlink(missing_ok=True)
     s = res.summary
     if not args.quiet:
+        jump = ("jump_off_force", "jump_off_contact_radius") if p.control == "force" else ()
         print(json.dumps({k: s[k] for k in ("pull_off_force", "pull_off_indent", "max_indent",
-                                            "max_contact_radius", "n_steps", "n_solves",
+                                            "max_contact_radius", *jump, "n_steps", "n_solves",
                                             "solver_iters", "wall_time")}, indent=1))
         print(f"wrote {out}" + ("" if plot_path is None else f" and {plot_path}")
               + (f" and {res.fields_path}" if res.fields_path else ""), file=sys.stderr)
