@@ -3,7 +3,7 @@ PYTHON ?= python3
 NAME ?=
 JOBS ?= $(shell nproc 2>/dev/null || echo 1)
 
-.PHONY: install test test-slow run bench paper campaign campaigns clean
+.PHONY: install test test-slow run bench bench-quick bench-scale validate rough paper campaign campaigns clean
 
 install:            ## install tfm and its test dependencies (editable)
 	$(PYTHON) -m pip install -q -e ".[test]"
@@ -17,8 +17,21 @@ test-slow:          ## paper-scale regression tests (minutes to hours)
 run:                ## the main job on its embedded default: the paper's Fig. 3 case
 	tfm run --overwrite -o results/default/curve.parquet
 
-bench:              ## operator and full-curve benchmarks (medians; prints the machine)
-	$(PYTHON) -m bench.run_bench
+bench:              ## ratios against bench/baseline.py, before/after, operators, curves, tree (medians)
+	$(PYTHON) -m bench.run_bench $(BENCH_FLAGS)
+
+bench-quick:        ## the ratios without the 2-minute baseline run at 1/256
+	$(PYTHON) -m bench.run_bench --only ratios --no-baseline-256
+
+bench-scale:        ## scaling table 1/64 ... 1/1024: wall, solves, CG iterations, CPU/wall, peak RSS
+	$(PYTHON) -m bench.run_bench --scale
+
+validate:           ## tfm against ContactMechanics (non-adhesive rough contact); pip install -e ".[validate]"
+	$(PYTHON) -m bench.validate_contactmechanics
+
+rough:              ## the rough-sphere campaign, then its figure and table in results/rough/
+	tfm campaign run campaigns/rough_sphere.toml --jobs $(JOBS)
+	$(PYTHON) -m bench.rough_report
 
 campaign:           ## run campaigns/$(NAME).toml, e.g. make campaign NAME=smoke JOBS=2
 	@test -n "$(NAME)" || (echo "usage: make campaign NAME=<file stem>; see make campaigns"; exit 2)

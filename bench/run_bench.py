@@ -6,9 +6,14 @@ asserted. Each section says what it measures; the machine is printed first.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
+import re
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -85,12 +90,148 @@ def curve_table(spacings=("1/64", "1/128", "1/256"), repeats=3):
     return rows
 
 
+STANDARD = dict(alpha=0.75, k_th=0.02, radius=1.0, shape="paraboloid", max_indent=0.05, step=2.5e-4)
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _env():
+    env = dict(os.environ)
+    env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    return env
+
+
+def _timed(cmd):
+    """Wall seconds of a whole process, and its stdout."""
+    t = time.perf_counter()
+    out = subprocess.run(cmd, capture_output=True, text=True, env=_env(), cwd=ROOT, check=True).stdout
+    return time.perf_counter() - t, out
+
+
+def baseline_run(spacing):
+    """(in-process wall as the script reports it, whole-process wall) of bench/baseline.py."""
+    whole, out = _timed([sys.executable, os.path.join(ROOT, "bench", "baseline.py"), spacing])
+    return float(re.search(r"wall ([0-9.]+) s", out).group(1)), whole
+
+
+def tfm_in_process(spacing):
+    from tfm import Params, simulate
+    return simulate(Params.from_dict(dict(STANDARD, spacing=spacing))).summary["wall_time"]
+
+
+def tfm_whole_process(spacing):
+    """`tfm run` of the standard curve, plot and Parquet included."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "tfm.cli", "run", "--spacing", spacing, "--shape", "paraboloid",
+               "--alpha", "0.75", "--k-th", "0.02", "--radius", "1", "--max-indent", "0.05",
+               "--step", "2.5e-4", "-q", "-o", os.path.join(tmp, "curve.parquet")]
+        return _timed(cmd)[0]
+
+
+def ratio_table(repeats=3, with_256_baseline=True):
+    """The issue's ratios: baseline and tfm interleaved, medians over ``repeats`` pairs."""
+    from tfm import Params, simulate
+    simulate(Params.from_dict(dict(STANDARD, spacing=1 / 16)))        # compile outside timing
+    rows = []
+    cases = [("1/128", "in-process"), ("1/128", "whole process"), ("1/256", "in-process")]
+    for sp, how in cases:
+        base, mine = [], []
+        skip_base = sp == "1/256" and not with_256_baseline
+        for _ in range(1 if sp == "1/256" else repeats):
+            if not skip_base:
+                b_in, b_whole = baseline_run(sp)
+                base.append(b_in if how == "in-process" else b_whole)
+            mine.append(tfm_in_process(sp) if how == "in-process" else tfm_whole_process(sp))
+        mb = statistics.median(base) if base else float("nan")
+        mt = statistics.median(mine)
+        rows.append((sp, how, mb, mt, mb / mt, len(mine)))
+    return rows
+
+
+def old_engine_table(spacings=("1/128", "1/256"), repeats=3):
+    """Before/after in one run: the old Python engine (tests/reference_engine.py, the code
+    of main before the compiled engine) against tfm.simulate, interleaved."""
+    sys.path.insert(0, os.path.join(ROOT, "tests"))
+    from reference_engine import reference_curve
+    from tfm import Params, simulate
+    rows = []
+    for sp in spacings:
+        p = Params.from_dict(dict(STANDARD, spacing=sp))
+        simulate(p.replace(spacing=1 / 16))
+        reference_curve(p.replace(spacing=1 / 16))
+        old, new = [], []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            reference_curve(p)
+            old.append(time.perf_counter() - t)
+            new.append(simulate(p).summary["wall_time"])
+        rows.append((sp, statistics.median(old), statistics.median(new),
+                     statistics.median(old) / statistics.median(new)))
+    return rows
+
+
+_CHILD = """
+import json, resource, sys, time
+from tfm import Params, simulate
+p = Params.from_dict(dict({std}, spacing={sp!r}))
+simulate(p.replace(spacing=1 / 16))
+c0 = time.process_time()
+res = simulate(p)
+s = res.summary
+print(json.dumps(dict(wall=s["wall_time"], cpu=time.process_time() - c0, solves=s["n_solves"],
+      iters=s["solver_iters"], pull_off=s["pull_off_force"], side=s["grid_side"],
+      rss=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)))
+"""
+
+
+def scale_table(spacings=("1/64", "1/128", "1/256", "1/512", "1/1024")):
+    """One subprocess per spacing: wall, solves, CG iterations, CPU/wall, peak RSS."""
+    rows = []
+    for sp in spacings:
+        code = _CHILD.format(std=STANDARD, sp=sp)
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             env=_env(), cwd=ROOT, check=True).stdout
+        r = json.loads(out.strip().splitlines()[-1])
+        rows.append((sp, r["side"], r["wall"], r["solves"], r["iters"], r["cpu"] / r["wall"],
+                     r["rss"] / 1024.0, r["pull_off"]))
+        print(f"| {sp} | {r['side']}^2 | {r['wall']:.2f} | {r['solves']} | {r['iters']} | "
+              f"{r['cpu'] / r['wall']:.2f} | {r['rss'] / 1024:.0f} | {r['pull_off']:.7g} |", flush=True)
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="smaller sizes and fewer repeats")
-    ap.add_argument("--only", choices=["operators", "curves", "tree"], default=None)
+    ap.add_argument("--only", choices=["ratios", "old", "operators", "curves", "tree"], default=None)
+    ap.add_argument("--scale", action="store_true",
+                    help="only the scaling table 1/64 ... 1/1024 (one subprocess per spacing)")
+    ap.add_argument("--max-spacing", default="1/1024", help="--scale: finest spacing")
+    ap.add_argument("--no-baseline-256", action="store_true",
+                    help="skip the plain SciPy baseline at 1/256 (about 2 min)")
+    ap.add_argument("--repeats", type=int, default=3, help="A/B pairs per ratio")
     args = ap.parse_args(argv)
     print(f"# tfm benchmarks\n\nmachine: {machine()}\n")
+    if args.scale:
+        print("## Standard curve, one process per spacing (CPU/wall = cores busy)\n")
+        print("| spacing | grid | wall s | solves | CG iterations | CPU/wall | peak RSS MiB | pull-off |")
+        print("|---|---|---|---|---|---|---|---|")
+        all_sp = ("1/64", "1/128", "1/256", "1/512", "1/1024")
+        scale_table(all_sp[: all_sp.index(args.max_spacing) + 1])
+        return
+    if args.only in (None, "ratios"):
+        print("## Against the plain SciPy script (bench/baseline.py), interleaved, medians\n")
+        print("| spacing | timing | baseline s | tfm s | ratio | pairs |")
+        print("|---|---|---|---|---|---|")
+        for sp, how, b, t, ratio, k in ratio_table(args.repeats, not args.no_baseline_256):
+            print(f"| {sp} | {how} | {b:.2f} | {t:.2f} | {ratio:.1f}x | {k} |")
+        print()
+    if args.only in (None, "old"):
+        print("## Before/after: the old Python engine (tests/reference_engine.py) against tfm, "
+              "in-process, interleaved, medians\n")
+        print("| spacing | old engine s | tfm s | speed-up |")
+        print("|---|---|---|---|")
+        for sp, o, t, ratio in old_engine_table(repeats=args.repeats):
+            print(f"| {sp} | {o:.2f} | {t:.2f} | {ratio:.1f}x |")
+        print()
     if args.only in (None, "operators"):
         sizes = (64, 128) if args.quick else (128, 256, 512)
         print("## Operator: one application of C to a full n x n field (median seconds)\n")

@@ -5,6 +5,7 @@ The campaign used throughout is campaigns/smoke.toml (6 coarse runs, a few secon
 from __future__ import annotations
 
 import importlib
+import json
 import os
 import signal
 import subprocess
@@ -300,7 +301,7 @@ def test_result_does_not_depend_on_thread_count():
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("needs 2 Numba threads")
     p = Params.from_dict(dict(spacing="1/128", shape="paraboloid", k_th=0.02, radius=1.0,
-                              max_indent=0.05, step=0.01))
+                              max_indent=0.05, step=0.01, allow="step"))   # 5 steps: enough here
     outs = []
     before = numba.get_num_threads()
     try:
@@ -390,3 +391,159 @@ def test_load_tables_accepts_name_folder_or_file(serial_run):
         assert load_tables(other, results_dir=results)[0]["run_id"].tolist() == by_name["run_id"].tolist()
     with pytest.raises(FileNotFoundError, match="run the campaign first"):
         load_tables("no-such-campaign", results_dir=results)
+
+
+# ---- round trips ---------------------------------------------------------------------
+def test_every_table_row_rebuilds_its_params_with_the_same_run_id(serial_run, capsys):
+    results, root = serial_run
+    summary, _ = load_tables("smoke", results_dir=results)
+    for row in summary.to_dict("records"):           # NaN for None, NumPy scalars, "0.05" strings
+        assert Params.from_row(row).run_id == row["run_id"]
+    assert tfm_main(["campaign", "expand", str(SMOKE), "--json"]) == 0
+    for line in capsys.readouterr().out.splitlines():
+        record = json.loads(line)
+        run_id = record.pop("run_id")
+        record.pop("index")
+        assert Params.from_dict(record).run_id == run_id
+
+
+# ---- guards and sizes at expansion -------------------------------------------------------
+@pytest.mark.parametrize("extra, expected", [
+    ("spacing = '1/4'\nmax_indent = 0.01\nstep = 1e-3\n", ["run 0", "spacing: only", "--allow coarse"]),
+    ("spacing = '1/32'\nmax_indent = 0.05\nstep = 5e-3\ntol = 1e-2\n", ["run 0", "tol: 0.01 is looser"]),
+])
+def test_a_meaningless_run_in_a_campaign_is_refused_at_expansion(tmp_path, extra, expected):
+    path = _write(tmp_path, 'name = "g"\n[base]\nk_th = 0.02\nshape = "paraboloid"\n' + extra)
+    with pytest.raises(CampaignError) as info:
+        load_spec(path)
+    assert str(info.value).startswith(str(path)) and all(e in str(info.value) for e in expected), info.value
+    path.write_text(path.read_text() + "allow = 'coarse,tol'\n")
+    assert len(load_spec(path).runs) == 1
+
+
+def test_an_absurd_campaign_is_refused_with_its_count_before_it_expands(tmp_path, capsys):
+    million = {"name": "big", "base": {"k_th": 0.02, "shape": "paraboloid", "spacing": "1/32"},
+               "sweep": {"radius": list(range(1, 101)), "alpha": [i / 100 for i in range(100)],
+                         "step": [1e-4 * (i + 1) for i in range(100)]}}
+    start = time.perf_counter()
+    with pytest.raises(CampaignError, match=r"expands to 1,000,000 runs, more than max_runs = 10,000.*"
+                                            r"max_runs = 1000000.*--max-runs 1000000"):
+        spec_from_dict(million)
+    assert time.perf_counter() - start < 1.0            # counted, not expanded
+    path = _write(tmp_path, BASE.replace("[base]", "max_runs = 3\n[base]") + "[sweep]\nalpha = [0.5, 0.6, 0.7, 0.75]\n")
+    assert tfm_main(["campaign", "expand", str(path)]) == 2
+    assert "expands to 4 runs, more than max_runs = 3" in capsys.readouterr().err
+    assert tfm_main(["campaign", "expand", str(path), "--max-runs", "4"]) == 0
+    with pytest.raises(CampaignError, match="max_runs: expected a whole number"):
+        spec_from_dict({"name": "x", "max_runs": "lots"})
+
+
+def test_a_campaign_that_cannot_fit_is_refused_before_any_run(tmp_path, monkeypatch):
+    monkeypatch.setattr("tfm.guards.available_memory", lambda: 100 * 2 ** 20)
+    with pytest.raises(CampaignError, match=r"needs about .* GiB for 2 at once, but 0.10 GiB is available"):
+        run_campaign(SMOKE, jobs=2, quiet=True, results_dir=tmp_path)
+    assert not list((tmp_path / "smoke").rglob("*.parquet"))
+
+
+# ---- one results folder per campaign file -------------------------------------------------
+TINY = 'name = "dup"\n[base]\nspacing = "1/16"\nk_th = 0.02\nshape = "paraboloid"\nmax_indent = 0.05\nstep = 5e-3\n'
+
+
+def test_another_file_with_the_same_name_is_refused(tmp_path, capsys):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    first, second = tmp_path / "a" / "dup.toml", tmp_path / "b" / "dup.toml"
+    first.write_text(TINY + "alpha = 0.5\n")
+    second.write_text(TINY + "alpha = 0.75\n")
+    res = str(tmp_path / "res")
+    assert tfm_main(["campaign", "run", str(first), "--results-dir", res, "-q"]) == 0
+    record = json.loads((tmp_path / "res" / "dup" / "campaign.json").read_text())
+    assert record["origin"] == str(first.resolve()) and record["sha256"] == load_spec(first).digest
+    before = pd.read_parquet(tmp_path / "res" / "dup" / "summary.parquet")
+    assert tfm_main(["campaign", "run", str(second), "--results-dir", res, "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "holds the results of campaign" in err and str(first) in err and "same name 'dup'" in err
+    assert tfm_main(["campaign", "status", str(second), "--results-dir", res]) == 2
+    assert pd.read_parquet(tmp_path / "res" / "dup" / "summary.parquet").equals(before)   # untouched
+
+    # the same file, edited, resumes; a copy of it elsewhere (same content) is the same campaign
+    first.write_text(TINY + "[sweep]\nalpha = [0.5, 0.6]\n")
+    assert tfm_main(["campaign", "run", str(first), "--results-dir", res, "-q"]) == 0
+    second.write_text("# a copy\n" + first.read_text())
+    assert tfm_main(["campaign", "status", str(second), "--results-dir", res]) == 0
+    assert "2 done" in capsys.readouterr().out
+
+
+# ---- a pool that survives a dead worker ------------------------------------------------------
+def test_a_killed_worker_fails_only_its_own_run(tmp_path):
+    """SIGKILL one pool worker mid-run (as the out-of-memory killer would): that run is
+    recorded as failed with the cause, the pool is rebuilt, every other run finishes."""
+    psutil = pytest.importorskip("psutil")
+    path = tmp_path / "pool.toml"
+    path.write_text('name = "pool"\n[base]\nspacing = "1/64"\nk_th = 0.02\nshape = "paraboloid"\n'
+                    'max_indent = 0.05\nstep = 2.5e-4\n[sweep]\nalpha = [0.5, 0.6, 0.7, 0.75]\n')
+    store = CampaignStore(tmp_path / "pool")
+    proc = subprocess.Popen([sys.executable, "-m", "tfm", "campaign", "run", str(path), "--jobs", "2",
+                             "--results-dir", str(tmp_path), "--quiet"],
+                            cwd=REPO, env={**os.environ, "CI": "true", "PYTHONPATH": str(REPO)},
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 180
+    killed = None
+    try:
+        while killed is None:
+            assert proc.poll() is None, proc.stderr.read().decode()
+            assert time.monotonic() < deadline, "no run finished within 3 minutes"
+            if any(store.runs_dir.glob("*.parquet")):         # workers warm, runs in flight
+                workers = [c for c in psutil.Process(proc.pid).children()
+                           if "spawn_main" in " ".join(c.cmdline())]
+                if len(workers) == 2:
+                    killed = workers[0].pid
+                    os.kill(killed, signal.SIGKILL)
+            time.sleep(0.01)
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 1, err.decode()
+    summary, _ = load_tables(store.root)
+    failures = load_failures(store.root)
+    assert len(failures) == 1 and len(summary) == 3, (failures, err.decode())
+    assert f"pid {killed}" in failures["error"].iloc[0] and "SIGKILL" in failures["error"].iloc[0]
+    assert set(summary["run_id"]) | set(failures["run_id"]) == set(load_spec(path).run_ids)
+    assert tfm_main(["campaign", "status", str(path), "--results-dir", str(tmp_path)]) == 1
+
+
+def test_the_pool_blames_the_run_whose_worker_died_and_finishes_the_rest():
+    """In process: one run kills its own worker mid-run; it fails with the cause, the
+    others (in flight on the other worker, or not yet started) finish in a rebuilt pool."""
+    from killers import KillsItsWorker
+
+    from tfm.campaign.runner import _run_pool
+    from tfm.campaign.spec import Run
+
+    good = load_spec(SMOKE).runs[:2]
+    killer = Run(index=9, params=KillsItsWorker())
+    outcomes = {run.run_id: outcome for run, outcome in _run_pool([killer, *good], jobs=2)}
+    assert set(outcomes) == {killer.run_id, *(r.run_id for r in good)}
+    assert "WorkerDied" in outcomes[killer.run_id].error and "SIGKILL" in outcomes[killer.run_id].error
+    for run in good:
+        assert outcomes[run.run_id].result is not None, outcomes[run.run_id].error
+        assert outcomes[run.run_id].result.params.run_id == run.run_id
+
+
+@pytest.mark.parametrize("results_dir", ["/proc/tfm-results", "{tmp}/file/sub"])
+def test_an_unwritable_results_folder_is_refused_before_any_run(tmp_path, capsys, results_dir):
+    (tmp_path / "file").write_text("not a folder")
+    results_dir = results_dir.format(tmp=tmp_path)
+    assert tfm_main(["campaign", "run", str(SMOKE), "--results-dir", results_dir, "-q"]) == 2
+    assert "results-dir: cannot write the campaign folder" in capsys.readouterr().err
+
+
+def test_a_capped_auto_preload_is_said_before_a_campaign_runs(tmp_path, capsys):
+    spec = spec_from_dict({"name": "capped", "base": {"spacing": "1/64", "k_th": 0.05, "shape": "paraboloid",
+                                                      "radius": 0.05, "step": 1e-3}})
+    assert spec.runs[0].notes and "auto preload capped at 0.5 R" in spec.runs[0].notes[0]
+    root = run_campaign(spec, results_dir=tmp_path)
+    err = capsys.readouterr().err
+    assert err.index("auto preload capped") < err.index("campaign capped: 1 runs done")
+    assert load_tables(root)[0]["status"].tolist() == ["flagged"]

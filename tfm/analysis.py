@@ -267,3 +267,67 @@ def _fraction(s: float) -> str:
 
 
 fraction_text = _fraction
+
+
+# ---- ensembles over seeds (rough surfaces, disordered thresholds) -------------------
+SEED_COLUMNS = ("p_roughness_seed", "p_disorder_seed")
+
+
+def hysteresis(curve: pd.DataFrame) -> float:
+    """Energy dissipated over the load-unload cycle: the area between the loading and
+    unloading curves, the integral of P d(delta) along the whole path from first contact
+    (delta = 0, P = 0) until no spring touches (P = 0). Trapezoidal in the steps."""
+    delta = np.concatenate([[0.0], curve["indent"].to_numpy(dtype=float)])
+    force = np.concatenate([[0.0], curve["force"].to_numpy(dtype=float)])
+    return float(np.sum(0.5 * (force[1:] + force[:-1]) * np.diff(delta)))
+
+
+def area_at_max_load(curve: pd.DataFrame) -> float:
+    """Contact area at the step of largest compressive force (the end of loading)."""
+    return float(curve["contact_area"].iloc[int(np.argmax(curve["force"].to_numpy()))])
+
+
+def run_metrics(curve: pd.DataFrame) -> dict:
+    """Pull-off force, hysteresis and contact area at maximum load of one run's curve."""
+    return {"pull_off_force": float(max(-curve["force"].min(), 0.0)),
+            "hysteresis": hysteresis(curve),
+            "area_at_max_load": area_at_max_load(curve)}
+
+
+def run_metrics_table(summary: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
+    """The campaign summary with one column per ``run_metrics`` entry (``m_<name>``)."""
+    metrics = {rid: run_metrics(c) for rid, c in curves.groupby("run_id", sort=False)}
+    out = summary.copy()
+    for name in ("pull_off_force", "hysteresis", "area_at_max_load"):
+        out["m_" + name] = [metrics[rid][name] if rid in metrics else math.nan for rid in out["run_id"]]
+    return out
+
+
+def ensemble_stats(summary: pd.DataFrame, curves: pd.DataFrame, by=None,
+                   seeds=SEED_COLUMNS, confidence: float = CONFIDENCE) -> pd.DataFrame:
+    """Mean and spread over seeds of pull-off force, hysteresis and area at maximum load.
+
+    Runs are grouped by ``by`` (default: every swept ``p_`` column except the seed
+    columns); within a group the seeds are the ensemble. Columns per metric: ``<m>_mean``,
+    ``<m>_std`` (sample standard deviation, ddof = 1: the seed-to-seed scatter),
+    ``<m>_ci`` (half-width of the Student-t interval of the mean), and ``n`` seeds."""
+    table = run_metrics_table(summary, curves)
+    seeds = [s for s in seeds if s in table.columns]
+    if by is None:
+        by = [c for c in table.columns if c.startswith("p_") and c not in seeds
+              and table[c].astype(str).nunique() > 1]
+    by = list(by)
+    rows = []
+    groups = table.groupby(by, sort=True, dropna=False) if by else [((), table)]
+    for key, g in groups:
+        key = key if isinstance(key, tuple) else (key,)
+        row = dict(zip(by, key))
+        row["n"] = len(g)
+        for name in ("pull_off_force", "hysteresis", "area_at_max_load"):
+            v = g["m_" + name].to_numpy(dtype=float)
+            std = float(np.std(v, ddof=1)) if v.size > 1 else math.nan
+            row[name + "_mean"] = float(np.mean(v))
+            row[name + "_std"] = std
+            row[name + "_ci"] = _t_quantile(v.size - 1, confidence) * std / math.sqrt(v.size) if v.size > 1 else math.nan
+        rows.append(row)
+    return pd.DataFrame(rows)

@@ -43,6 +43,24 @@ PARAM_HELP = {
     "max_load": "control=force: peak compressive load (default: the Hertz load at max_indent)",
     "load_step": "control=force: load increment and decrement (default max_load / 100)",
     "snapshots": "field snapshots beside the table: none | events | K (every K-th step + events)",
+    "hurst": "roughness: Hurst exponent H in (0, 1), PSD ~ q^(-2-2H)",
+    "rms_slope": "roughness: spectral rms slope (0 = smooth)",
+    "rms_height": "roughness: rms height (give it or rms_slope)",
+    "short_cutoff": "roughness: shortest wavelength (default 4 spacings; >= 2)",
+    "long_cutoff": "roughness: longest self-affine wavelength (default: the grid side)",
+    "rolloff": "roughness: PSD below long_cutoff = rolloff^2 C(q_L)",
+    "roughness_seed": "roughness: random seed",
+    "height_map": "shape=height_map: path to a .npy of heights (other formats: tfm[topography])",
+    "map_pixel_size": "shape=height_map: pixel size (default: the file's, else spacing)",
+    "height_map_hash": "sha256 of the map's heights (filled in; checked when given)",
+    "threshold_disorder": "none | uniform | weibull: random F_th per spring around its mean",
+    "disorder_width": "threshold disorder: std(F_th)/mean(F_th)",
+    "disorder_seed": "threshold disorder: random seed",
+    "units": "paper (nondimensional) | si (lengths in m, forces in N)",
+    "youngs_modulus": "units=si: Young's modulus E (Pa)",
+    "poisson_ratio": "units=si: Poisson ratio nu in (-1, 0.5]",
+    "work_of_adhesion": "units=si: gamma (J/m^2); K_th from the paper's last equation",
+    "k_th_coefficient": "units=si: c in F_max = c K_th^2 R: a number, paper (7.6) or jkr (3 pi^2/4)",
     "allow": "guards to override, comma-separated: coarse, step, tol, memory (docs/physics.md)",
 }
 
@@ -168,7 +186,8 @@ def cmd_run(args) -> int:
         jump = ("jump_off_force", "jump_off_contact_radius") if p.control == "force" else ()
         print(json.dumps({k: s[k] for k in ("pull_off_force", "pull_off_indent", "max_indent",
                                             "max_contact_radius", *jump, "n_steps", "n_solves",
-                                            "solver_iters", "wall_time")}, indent=1))
+                                            "solver_iters", "wall_time", "force_unit", "length_unit")},
+                         indent=1))
         print(f"wrote {out}" + ("" if plot_path is None else f" and {plot_path}")
               + (f" and {res.fields_path}" if res.fields_path else ""), file=sys.stderr)
     if s["warnings"]:

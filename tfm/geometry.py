@@ -84,7 +84,25 @@ def make_layout(p: Params) -> Layout:
 
 
 def heights(p: Params, layout: Layout) -> np.ndarray:
-    """Undeformed spring lengths x0 (surface height), apex at 0."""
+    """Undeformed spring lengths x0 (surface height), apex at 0.
+
+    The body's shape plus its roughness (``tfm.surfaces``), or a height map; a rough
+    surface or a map is shifted so that its highest spring is at 0, so the flat first
+    touches at d = 0 and the indentation counts from first contact."""
+    if p.shape == "height_map":
+        from .surfaces import map_heights
+        x0 = map_heights(p, layout.x, layout.y)
+    else:
+        x0 = _shape_heights(p, layout)
+    if p.rms_slope > 0 or p.rms_height > 0:
+        from .surfaces import roughness
+        x0 = x0 + roughness(p, layout.x, layout.y)
+    if p.shape == "height_map" or p.rms_slope > 0 or p.rms_height > 0:
+        x0 = x0 - x0[np.isfinite(x0)].max()
+    return x0
+
+
+def _shape_heights(p: Params, layout: Layout) -> np.ndarray:
     r2 = layout.x ** 2 + layout.y ** 2
     R = p.radius
     if p.shape == "paraboloid":

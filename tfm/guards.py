@@ -54,6 +54,8 @@ def contact_radius_estimate(p) -> float:
     kernel, the geometric sqrt(2 R d) where the kernel is short-ranged (Winkler-like)."""
     if p.shape == "flat_punch":
         return p.radius
+    if p.shape == "height_map":         # a nominally flat body as wide as the grid
+        return p.half_width
     factor = 1.0 if p.kernel == "boussinesq" else 2.0
     return math.sqrt(factor * p.radius * p.delta_max)
 
@@ -88,10 +90,12 @@ def _next_fast_len(n: int) -> int:
 
 
 # bytes per spring and per padded FFT cell, and the runtime's own baseline; fitted to
-# the peak resident memory measured at two sizes per operator (docs in estimate_memory)
-BYTES_PER_SPRING = {"fft": 170.0, "direct": 170.0, "tree": 225.0}
+# the peak resident memory measured at 513^2 and 1025^2 springs per operator (direct
+# 164-185, tree 222 bytes a spring; the square grid's FFT symbol 16 bytes a cell), checked
+# at 2049^2 (docs/physics.md, section 8)
+BYTES_PER_SPRING = {"fft": 200.0, "direct": 200.0, "tree": 240.0}
 BYTES_PER_FFT_CELL = 16.0
-BASELINE_BYTES = 260e6
+BASELINE_BYTES = 450e6     # measured 238 to 420 MiB after imports (and compilation)
 
 
 def estimate_memory(p) -> float:
@@ -131,6 +135,8 @@ def check(p, memory: bool = True) -> list[str]:
     """Refuse a meaningless or oversized run (GuardError) unless allowed; return the
     notes to state before it starts. ``memory=False`` skips the machine-dependent part
     (campaign files are validated on one machine and may run on another)."""
+    from .units import to_paper
+    p = to_paper(p)                     # SI: the same lengths, forces in the paper's units
     allowed = _allowed(p)
     notes = []
     a = contact_radius_estimate(p)

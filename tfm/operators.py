@@ -15,11 +15,17 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft as sfft
+import numba
+from numba import types
+from numba.typed import Dict
 
-from .config import STENCIL_RADIUS, fft_workers
+from .config import STENCIL_RADIUS
 from .geometry import Layout
-from .kernels.direct import BOUSSINESQ, LOCAL, NEIGHBORS, direct_sum
-from .kernels.grid import gather_box, index_box, scatter_box, stencil_apply
+from .kernels import fft as fftk
+from .kernels.compliance import BOUSSINESQ, LOCAL, NEIGHBORS, cutoff_squared
+from .kernels.contact import PRECOND_DTYPE, box_symbols
+from .kernels.direct import direct_sum
+from .kernels.grid import index_box, stencil_apply
 from .params import ParameterError, Params
 
 
@@ -34,14 +40,11 @@ class KernelSpec:
     diag: np.ndarray      # C_ii per spring
 
     def offdiag(self, r: np.ndarray) -> np.ndarray:
-        """C(r) for r > 0 (NumPy, used to build the FFT kernel and the slow references)."""
+        """C(r) for r > 0 (NumPy, for small dense checks; the rule of tfm.kernels.compliance)."""
+        r2 = np.asarray(r, dtype=float) ** 2
         with np.errstate(divide="ignore"):
-            inv = np.where(r > 0, 1.0 / np.where(r > 0, r, 1.0), 0.0)
-        if self.kind == LOCAL:
-            return np.zeros_like(r)
-        if self.kind == NEIGHBORS:
-            return np.where(r <= self.cutoff * (1.0 + 1e-12), inv, 0.0)
-        return inv
+            inv = 1.0 / np.sqrt(np.where(r2 > 0, r2, 1.0))
+        return np.where((r2 > 0) & (r2 <= cutoff_squared(self.kind, self.cutoff)), inv, 0.0)
 
 
 def kernel_spec(p: Params, layout: Layout) -> KernelSpec:
@@ -54,97 +57,63 @@ def kernel_spec(p: Params, layout: Layout) -> KernelSpec:
 
 
 # --------------------------------------------------------------------------- FFT
-def _grid_kernel(spec: KernelSpec, n: int, P: int, spacing: float, diag0: float) -> np.ndarray:
-    """The kernel on a P x P periodic box, holding every offset |a|, |b| <= n - 1.
-
-    With P >= 2n - 1 the circular convolution of a zero-padded n x n field equals the
-    linear one: no periodic images."""
-    a = np.arange(P)
-    a = np.where(a < n, a, np.where(a > P - n, a - P, 0)).astype(float)
-    keep = (np.arange(P) < n) | (np.arange(P) > P - n)
-    r = np.hypot(a[:, None], a[None, :]) * spacing
-    K = spec.offdiag(r) * (keep[:, None] & keep[None, :])
-    K[0, 0] = diag0
-    return K
-
-
 def box_symbol(spec: KernelSpec, P: int, spacing: float) -> np.ndarray:
     """Real symbol of the kernel on a P x P periodic box: exact linear convolution for any
     sources and targets within a (P + 1) // 2 wide box."""
-    K = _grid_kernel(spec, (P + 1) // 2, P, spacing, float(spec.diag[0]))
-    # the kernel is real and even, so its transform is real up to round-off
-    return sfft.rfft2(K).real.copy()
+    return fftk.symbol(cutoff_squared(spec.kind, spec.cutoff), spacing, float(spec.diag[0]), P)
 
 
 def grid_symbol(spec: KernelSpec, layout: Layout) -> tuple[np.ndarray, int]:
     """Symbol of the circulant embedding of C on the whole square grid, and its size P."""
-    n = layout.shape[0]
-    P = sfft.next_fast_len(2 * n - 1, real=True)
+    P = fftk.fast_len(2 * layout.shape[0] - 1)
     return box_symbol(spec, P, layout.spacing), P
 
 
 class FFTOperator:
-    """Exact zero-padded convolution on the square grid (scipy.fft, fast sizes).
+    """Exact zero-padded convolution on the square grid (compiled pocketfft, tfm.kernels.fft).
 
     The convolution runs on the bounding box (width w) of the sources and targets only,
     padded to a fast size P >= 2w - 1: inside the contact solve both are the contact set,
-    far smaller than the grid. The transform is pruned: only the w non-zero rows are
-    transformed along the rows, and only the w wanted rows are transformed back.
-    Symbols are cached per P. Small transforms run on one thread (bench: thread start-up
-    costs more than it saves below P ~ 512); pocketfft computes every 1-D transform the
-    same way for any thread count, so results do not depend on it."""
+    far smaller than the grid. Symbols and inverse symbols (the preconditioner's) are
+    cached per P in typed dicts that the compiled contact solve shares."""
 
     name = "fft"
-    THREADED_SIZE = 512
 
     def __init__(self, spec: KernelSpec, layout: Layout, symbol=None):
         if layout.shape is None:
             raise ParameterError("operator: 'fft' needs a regular square grid")
         self.spec, self.spacing = spec, layout.spacing
         self.n = layout.shape[0]
+        self.cut2 = cutoff_squared(spec.kind, spec.cutoff)
+        self.diag = np.ascontiguousarray(spec.diag, dtype=float)
         self.all = np.arange(layout.n)
-        self.workers = fft_workers()
-        self._symbols: dict[int, np.ndarray] = {}
-        self._inverses: dict[int, np.ndarray] = {}
+        self.syms = Dict.empty(key_type=types.int64, value_type=types.float64[:, ::1])
+        self.isyms = Dict.empty(key_type=types.int64, value_type=numba.typeof(np.zeros((1, 1), PRECOND_DTYPE)))
         if symbol is not None:
-            self._symbols[symbol[1]] = symbol[0]
+            self.syms[symbol[1]] = np.ascontiguousarray(symbol[0])
+            self.isyms[symbol[1]] = (1.0 / self.syms[symbol[1]]).astype(PRECOND_DTYPE)
 
-    def symbol(self, P: int) -> np.ndarray:
-        if P not in self._symbols:
-            self._symbols[P] = box_symbol(self.spec, P, self.spacing)
-        return self._symbols[P]
-
-    def inverse_symbol(self, P: int) -> np.ndarray:
-        if P not in self._inverses:
-            self._inverses[P] = 1.0 / self.symbol(P)
-        return self._inverses[P]
+    def symbols(self, P: int) -> tuple[np.ndarray, np.ndarray]:
+        return box_symbols(self.syms, self.isyms, P, self.cut2, self.spacing, float(self.diag[0]))
 
     def apply_inverse(self, src, f_src, tgt=None):
         """C^-1 on the box of src and tgt (the FFT preconditioner): same transforms."""
-        return self._convolve(src, f_src, tgt, self.inverse_symbol)
+        return self._convolve(src, f_src, tgt, 1)
 
     def apply(self, src, f_src, tgt=None):
-        return self._convolve(src, f_src, tgt, self.symbol)
+        return self._convolve(src, f_src, tgt, 0)
 
-    def _convolve(self, src, f_src, tgt, symbol_of):
+    def _convolve(self, src, f_src, tgt, which):
         n = self.n
+        src = np.ascontiguousarray(src, dtype=np.int64)
         if tgt is None:
             i0, j0, w, tgt = 0, 0, n, self.all
-        elif tgt is src:
-            i0, j0, w = index_box(n, src)
         else:
-            i0, j0, w = index_box(n, np.concatenate((src, tgt)))
+            tgt = np.ascontiguousarray(tgt, dtype=np.int64)
+            i0, j0, w, _ = index_box(n, np.concatenate((src, tgt)))
         w = max(w, 1)
-        P = sfft.next_fast_len(2 * w - 1, real=True)
-        workers = self.workers if P >= self.THREADED_SIZE else 1
-        box = np.zeros((w, w))
-        scatter_box(box, n, i0, j0, src, f_src)
-        a = sfft.rfft(box, n=P, axis=1, workers=workers)
-        a = sfft.fft(a, n=P, axis=0, workers=workers, overwrite_x=True)
-        a *= symbol_of(P)
-        a = sfft.ifft(a, axis=0, workers=workers, overwrite_x=True)[:w]
-        u = sfft.irfft(a, n=P, axis=1, workers=workers)
-        return gather_box(u, n, i0, j0, tgt)
+        sym = self.symbols(fftk.fast_len(2 * w - 1))[which]
+        return fftk.box_apply(sym, src, np.ascontiguousarray(f_src, dtype=float), tgt, n, i0, j0, w)
 
 
 class DirectOperator:

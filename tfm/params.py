@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import hashlib
 import json
 import math
@@ -25,12 +26,11 @@ import numbers
 import re
 import warnings
 from dataclasses import dataclass, fields
-from fractions import Fraction
 from typing import Any, Callable, Mapping
 
 from .config import SCHEMA_VERSION
 
-SHAPES = ("sphere", "paraboloid", "flat_punch")
+SHAPES = ("sphere", "paraboloid", "flat_punch", "height_map")
 KERNELS = ("boussinesq", "local", "neighbors")
 OPERATORS = ("fft", "direct", "tree")
 LAYOUTS = ("square", "hexagonal", "jittered")
@@ -38,6 +38,8 @@ SNAP_RULES = ("batch", "single")
 PRECONDITIONERS = ("auto", "fft", "stencil", "diagonal", "none")
 CONTROLS = ("displacement", "force")
 SNAPSHOT_MODES = ("none", "events")
+DISORDERS = ("none", "uniform", "weibull")
+UNITS = ("paper", "si")
 
 
 class ParameterError(ValueError):
@@ -117,15 +119,42 @@ class Params:
     # grid extent (half-width of the square region holding the springs); None = auto
     extent: float | None = None
     extent_margin: float = 1.3          # auto extent = margin * Hertz radius + 4 spacings
+    # self-affine roughness added to the shape (tfm.surfaces; SurfaceTopography's
+    # fourier_synthesis conventions). rms_slope = rms_height = 0: smooth.
+    hurst: float = 0.8                  # H in (0, 1): C(q) ~ q^(-2-2H)
+    rms_slope: float = 0.0              # spectral rms slope of the realized surface
+    rms_height: float = 0.0             # or its rms height (give one of the two)
+    short_cutoff: float | None = None   # lambda_s; None = 4 spacings
+    long_cutoff: float | None = None    # lambda_L; None = the grid side (no roll-off)
+    rolloff: float = 1.0                # PSD below q_L = rolloff^2 C(q_L)
+    roughness_seed: int = 0
+    # measured topography: shape="height_map"
+    height_map: str | None = None       # path to a .npy (or, with tfm[topography], any
+                                        # format SurfaceTopography reads); heights in length units
+    map_pixel_size: float | None = None  # None = spacing
+    height_map_hash: str | None = None  # sha256 of the map's heights; filled in, then checked
+    # per-spring threshold disorder around the mean F_th (tfm.threshold)
+    threshold_disorder: str = "none"    # none | uniform | weibull
+    disorder_width: float = 0.0         # coefficient of variation std(F_th)/mean(F_th)
+    disorder_seed: int = 0
+    # physical units (tfm.units); "si": lengths in m, forces in N
+    units: str = "paper"
+    youngs_modulus: float | None = None   # E (Pa), units="si"
+    poisson_ratio: float | None = None    # nu in (-1, 0.5], units="si"
+    work_of_adhesion: float | None = None  # gamma (J/m^2), units="si"
+    k_th_coefficient: float | str = "paper"  # c in F_max = c K_th^2 R: a number or a name
     # loading protocol (tfm.protocol) and field output (tfm.snapshots)
     control: str = "displacement"       # "displacement" (the paper's runs) or "force"
     max_load: float | None = None       # control="force": peak compressive load; None = Hertz load at max_indent
     load_step: float | None = None      # control="force": load decrement; None = max_load / 100
     snapshots: int | str = "none"       # "none", "events", or every k-th step (plus the events)
+
     # meaningful-run guards to override (tfm.guards.GUARDS), comma-separated; not hashed
     allow: str = ""
 
     def __post_init__(self) -> None:
+        if self.threshold_disorder is None:       # "none" in TOML and on the CLI reads as None
+            object.__setattr__(self, "threshold_disorder", "none")
         _normalize(self)
         _validate_protocol(self)       # before _validate: delta_max may depend on max_load
         _validate(self)
@@ -152,7 +181,7 @@ class Params:
         """control="force": the load step, resolving ``load_step=None``."""
         return float(self.load_step) if self.load_step is not None else self.peak_load / 100.0
 
-    @property
+    @functools.cached_property           # a pure function of a frozen record
     def delta_max(self) -> float:
         """The preload depth, resolving ``max_indent="auto"`` (under force control with an
         explicit max_load: the Hertz depth of that load, which sizes the grid)."""
@@ -160,6 +189,9 @@ class Params:
             from .theory import hertz_indent
             return float(hertz_indent(self.max_load, self.radius))
         if self.max_indent == "auto":
+            if self.units == "si":          # same lengths in paper units with L* = 1 m
+                from .units import to_paper
+                return to_paper(self).delta_max
             from .theory import auto_max_indent
             return auto_max_indent(self)
         return float(self.max_indent)
@@ -168,6 +200,9 @@ class Params:
     def half_width(self) -> float:
         if self.extent is not None:
             return float(self.extent)
+        if self.shape == "height_map":      # the largest centred square the map covers
+            from .surfaces import load_height_map, map_half_width
+            return map_half_width(self, load_height_map(self.height_map))
         # Hertz radius for the elastic kernel; the geometric one where the kernel is
         # short-ranged (Winkler-like) and the contact spreads further.
         factor = 1.0 if self.kernel == "boussinesq" else 2.0
@@ -178,15 +213,18 @@ class Params:
 
     # ---- (de)serialization ------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
+        return {name: getattr(self, name) for name in _NAMES}    # scalars and strings only
 
     def canonical_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
 
-    @property
+    @functools.cached_property
     def run_id(self) -> str:
         """Hash of the parameters that change the numbers (all but ``NOT_HASHED``)."""
-        values = {k: v for k, v in self.to_dict().items() if k not in NOT_HASHED}
+        # fields added after the first schema are left out at their defaults, so runs
+        # stored before they existed keep their ids
+        values = {k: v for k, v in self.to_dict().items() if k not in NOT_HASHED
+                  and not (k in _LATER_FIELDS and v == _LATER_FIELDS[k])}
         text = f"schema={SCHEMA_VERSION};" + json.dumps(values, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -206,8 +244,9 @@ class Params:
                 hint = f" (did you mean {close[0]!r}?)" if close else ""
                 raise ParameterError(f"{prefix}unknown parameter {key!r}{hint}")
             clean[key] = _coerce(key, value, prefix)
-        # an explicit k_th without f_th means "use k_th"
-        if clean.get("k_th") is not None and "f_th" not in clean:
+        # an explicit k_th without f_th means "use k_th"; so does an SI run (its threshold
+        # follows from work_of_adhesion, and the default f_th is in paper units)
+        if (clean.get("k_th") is not None or clean.get("units") == "si") and "f_th" not in clean:
             clean["f_th"] = None
         try:
             params = cls(**clean)
@@ -239,7 +278,18 @@ class Params:
     def replace(self, **changes: Any) -> "Params":
         if changes.get("k_th") is not None and "f_th" not in changes:
             changes["f_th"] = None
+        if "height_map" in changes and "height_map_hash" not in changes:
+            changes["height_map_hash"] = None        # a new map: hash its content again
         return dataclasses.replace(self, **changes)
+
+
+# fields added after schema 1, with their defaults (left out of the run id at default)
+_LATER_FIELDS = {f.name: f.default for f in fields(Params)
+                 if f.name in ("hurst", "rms_slope", "rms_height", "short_cutoff", "long_cutoff",
+                               "rolloff", "roughness_seed", "height_map", "map_pixel_size",
+                               "height_map_hash", "threshold_disorder", "disorder_width",
+                               "disorder_seed", "units", "youngs_modulus", "poisson_ratio",
+                               "work_of_adhesion", "k_th_coefficient")}
 
 
 NOT_HASHED = ("allow",)      # fields that change no number, so not part of the run id
@@ -250,6 +300,7 @@ def _kind(annotation: str) -> str:
     return "float" if "float" in annotation else "int" if "int" in annotation else "str"
 
 
+_NAMES = tuple(f.name for f in fields(Params))
 _KINDS = {f.name: _kind(str(f.type)) for f in fields(Params)}
 _OPTIONAL = {f.name for f in fields(Params) if "None" in str(f.type)}
 _DEFAULTS = {f.name: f.default for f in fields(Params)}
@@ -268,17 +319,23 @@ def _normalize(p: Params) -> None:
     records have equal run ids (``radius=1`` and ``radius=np.float64(1.0)``)."""
     for name, kind in _KINDS.items():
         value = getattr(p, name)
-        if isinstance(value, bool) or value is None:
-            continue
-        if kind == "float" and isinstance(value, numbers.Real) and not isinstance(value, float):
+        t = type(value)
+        if t is float or t is str or t is bool or value is None:
+            continue                                   # the common case, kept cheap
+        if t is int:
+            if kind == "float":
+                object.__setattr__(p, name, float(value))
+        elif kind == "float" and isinstance(value, numbers.Real):
             object.__setattr__(p, name, float(value))
-        elif kind == "float" and isinstance(value, float) and type(value) is not float:
-            object.__setattr__(p, name, float(value))
-        elif kind == "int" and isinstance(value, numbers.Integral) and type(value) is not int:
+        elif kind == "int" and isinstance(value, numbers.Integral):
             object.__setattr__(p, name, int(value))
     if isinstance(p.allow, str):
         names = sorted({a.strip() for a in p.allow.split(",") if a.strip()})
         object.__setattr__(p, "allow", ",".join(names))
+
+
+def _rough(p: Params) -> bool:
+    return p.rms_slope > 0 or p.rms_height > 0
 
 
 # ---- which parameters apply when: the one table ----------------------------------
@@ -312,6 +369,20 @@ APPLIES: dict[str, Applies] = {
     "extent_margin": Applies("extent is automatic (extent = none)", lambda p: p.extent is None),
     "max_load": Applies("control='force'", lambda p: p.control == "force"),
     "load_step": Applies("control='force'", lambda p: p.control == "force"),
+    "extent_margin": Applies("extent is automatic (extent = none) and shape is not 'height_map'",
+                             lambda p: p.extent is None and p.shape != "height_map"),
+    # roughness, height maps, threshold disorder, units (tfm.surfaces, tfm.threshold, tfm.units)
+    **{name: Applies("the surface is rough (rms_slope or rms_height > 0)", lambda p: _rough(p))
+       for name in ("hurst", "short_cutoff", "long_cutoff", "rolloff", "roughness_seed")},
+    "radius": Applies("shape is 'sphere', 'paraboloid' or 'flat_punch'", lambda p: p.shape != "height_map"),
+    **{name: Applies("shape='height_map'", lambda p: p.shape == "height_map")
+       for name in ("height_map", "map_pixel_size", "height_map_hash")},
+    **{name: Applies("threshold_disorder is 'uniform' or 'weibull'", lambda p: p.threshold_disorder != "none")
+       for name in ("disorder_width", "disorder_seed")},
+    **{name: Applies("units='si' (paper units have E* = 1/pi)", lambda p: p.units == "si")
+       for name in ("youngs_modulus", "poisson_ratio", "work_of_adhesion")},
+    "k_th_coefficient": Applies("units='si' and work_of_adhesion is given",
+                                lambda p: p.units == "si" and p.work_of_adhesion is not None),
 }
 
 
@@ -333,6 +404,14 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
         kind = _KINDS[key]
         if key == "max_indent":
             return value if value == "auto" else parse_number(value, key)
+        if key == "k_th_coefficient":
+            from .units import K_TH_COEFFICIENTS
+            if isinstance(value, str) and value not in K_TH_COEFFICIENTS:
+                try:
+                    return parse_number(value, key)
+                except ParameterError:
+                    return value            # an unknown name: the validation names the choices
+            return value
         if key == "allow" and isinstance(value, (list, tuple)):
             return ",".join(str(v) for v in value)
         if kind == "float":
@@ -390,7 +469,7 @@ def _validate(p: Params) -> None:
     a = _finite("alpha", p.alpha)
     if not -1.0 <= a <= 3.0:
         raise ParameterError(f"alpha: must be in [-1, 3], got {a!r}")
-    if p.k_th is None and p.f_th is None:
+    if p.k_th is None and p.f_th is None and p.units != "si":   # SI: _validate_units
         raise ParameterError("k_th / f_th: give one threshold, k_th (F_th = k_th A^alpha) or f_th")
     if p.k_th is not None and p.f_th is not None:
         raise ParameterError("k_th / f_th: give only one of k_th and f_th, not both")
@@ -424,6 +503,8 @@ def _validate(p: Params) -> None:
     _positive("extent_margin", p.extent_margin)
     if p.extent is not None:
         _positive("extent", p.extent)
+    _validate_units(p)
+    _validate_surface(p)
     # relations between parameters
     dmax = p.delta_max
     if p.step > dmax:
@@ -446,6 +527,7 @@ def _validate(p: Params) -> None:
                              "use operator='tree' or 'direct'")
     if p.preconditioner in ("stencil", "fft") and p.layout != "square":
         raise ParameterError(f"preconditioner: {p.preconditioner!r} needs layout='square'; use 'auto' or 'none'")
+    _validate_surface_relations(p)
     _check_applies(p)
 
 
@@ -491,3 +573,135 @@ def _validate_protocol_relations(p: Params) -> None:
     if p.control == "force" and p.load_step is not None:
         if p.load_step > p.peak_load:
             raise ParameterError(f"load_step: must be <= max_load ({p.peak_load:g}), got {p.load_step!r}")
+
+
+# ---- roughness, height maps, threshold disorder (tfm.surfaces, tfm.threshold) ----
+# (which of these parameters apply when: APPLIES above)
+#: largest coefficient of variation of the uniform disorder: keeps every F_th >= 0
+MAX_UNIFORM_WIDTH = 1.0 / math.sqrt(3.0)
+#: coefficient of variation of the Weibull disorder: Weibull modulus from 85 down to 0.54
+WEIBULL_WIDTH_RANGE = (0.015, 2.0)
+
+
+def _validate_surface(p: Params) -> None:
+    """Roughness, height map and threshold disorder: values on their own."""
+    h = _finite("hurst", p.hurst)
+    if not 0.0 < h < 1.0:
+        raise ParameterError(f"hurst: must be in (0, 1) (self-affine Hurst exponent), got {h!r}")
+    for name in ("rms_slope", "rms_height"):
+        if _finite(name, getattr(p, name)) < 0:
+            raise ParameterError(f"{name}: must be >= 0 (0 = smooth), got {getattr(p, name)!r}")
+    if p.rms_slope > 0 and p.rms_height > 0:
+        raise ParameterError("rms_slope / rms_height: give one of them (the other sets itself), not both")
+    rough = _rough(p)
+    for name in ("short_cutoff", "long_cutoff"):
+        if getattr(p, name) is not None:
+            _positive(name, getattr(p, name))
+    if p.short_cutoff is not None and p.short_cutoff < 2.0 * p.spacing * (1 - 1e-12):
+        raise ParameterError(f"short_cutoff: must be >= 2 spacings ({2 * p.spacing:g}, the shortest "
+                             f"wavelength the grid carries), got {p.short_cutoff!r}")
+    if p.long_cutoff is not None:
+        short = p.short_cutoff if p.short_cutoff is not None else 4.0 * p.spacing
+        if short >= p.long_cutoff:
+            raise ParameterError(f"short_cutoff: must be < long_cutoff ({p.long_cutoff:g}), got {short!r}"
+                                 + ("" if p.short_cutoff is not None else " (the default, 4 spacings)"))
+    if _finite("rolloff", p.rolloff) < 0:
+        raise ParameterError(f"rolloff: must be >= 0 (PSD below long_cutoff = rolloff^2 C(q_L)), got {p.rolloff!r}")
+    _integer("roughness_seed", p.roughness_seed, 0)
+    if rough and p.max_indent == "auto":
+        raise ParameterError("max_indent: 'auto' assumes a smooth body; give a number for a rough surface "
+                             "(e.g. the smooth auto value plus 3 rms heights)")
+    # height map
+    is_map = p.shape == "height_map"
+    if is_map and p.height_map is None:
+        raise ParameterError("height_map: shape='height_map' needs height_map = <path to a .npy map>")
+    if not is_map and p.height_map is not None:
+        raise ParameterError(f"height_map: applies only to shape='height_map'; got shape={p.shape!r}")
+    if is_map:
+        if p.map_pixel_size is not None:
+            _positive("map_pixel_size", p.map_pixel_size)
+        if p.max_indent == "auto":
+            raise ParameterError("max_indent: 'auto' needs a sphere's JKR radius; give a number for a height map")
+        from .surfaces import MapError, load_height_map
+        try:
+            hm = load_height_map(p.height_map)
+        except MapError as exc:
+            raise ParameterError(str(exc)) from None
+        if p.height_map_hash is None:
+            object.__setattr__(p, "height_map_hash", hm.sha256)
+        elif p.height_map_hash != hm.sha256:
+            raise ParameterError(f"height_map: the content of {p.height_map!r} changed since this record "
+                                 f"was made (sha256 {hm.sha256[:12]}..., record {p.height_map_hash[:12]}...)")
+    # threshold disorder
+    _choice("threshold_disorder", p.threshold_disorder, DISORDERS)
+    w = _finite("disorder_width", p.disorder_width)
+    if p.threshold_disorder == "uniform" and not 0.0 < w <= MAX_UNIFORM_WIDTH:
+        raise ParameterError(f"disorder_width: must be in (0, {MAX_UNIFORM_WIDTH:.4f}] for 'uniform' "
+                             f"(std/mean; 1/sqrt(3) keeps F_th >= 0), got {w!r}")
+    lo, hi = WEIBULL_WIDTH_RANGE
+    if p.threshold_disorder == "weibull" and not lo <= w <= hi:
+        raise ParameterError(f"disorder_width: must be in [{lo:g}, {hi:g}] for 'weibull' (std/mean), got {w!r}")
+    _integer("disorder_seed", p.disorder_seed, 0)
+
+
+def _validate_surface_relations(p: Params) -> None:
+    """Roughness and map checks against the grid (after the extent is known)."""
+    hw = p.half_width
+    if p.long_cutoff is not None:
+        side = (2 * math.ceil(hw / p.spacing - 1e-9) + 1) * p.spacing
+        if p.long_cutoff > side * (1 + 1e-12):
+            raise ParameterError(f"long_cutoff: must be <= the grid side ({side:g}); no wavevector of the "
+                                 f"grid lies below a longer cutoff, got {p.long_cutoff!r}")
+    if p.shape == "height_map":
+        from .surfaces import load_height_map, map_half_width, map_pixel
+        hm = load_height_map(p.height_map)
+        avail = map_half_width(p, hm)
+        need = math.ceil(hw / p.spacing - 1e-9) * p.spacing
+        if avail <= 0 or need > avail * (1 + 1e-9):
+            nx, ny = hm.heights.shape
+            raise ParameterError(f"height_map: the map ({nx} x {ny} pixels of {map_pixel(p, hm):g}) covers "
+                                 f"+-{avail:g}, smaller than the grid (half-width {need:g}); "
+                                 "use a larger map or a smaller extent")
+
+
+def _validate_units(p: Params) -> None:
+    """units, the material and K_th's coefficient (tfm.units)."""
+    _choice("units", p.units, UNITS)
+    coefficient = p.k_th_coefficient
+    if isinstance(coefficient, str):
+        from .units import K_TH_COEFFICIENTS
+        _choice("k_th_coefficient", coefficient, tuple(K_TH_COEFFICIENTS))
+    elif _finite("k_th_coefficient", coefficient) <= 0:
+        raise ParameterError(f"k_th_coefficient: must be > 0 or a name (paper, jkr), got {coefficient!r}")
+    if p.units == "paper":
+        return                              # SI-only fields: APPLIES
+    if p.youngs_modulus is None or p.poisson_ratio is None:
+        raise ParameterError("youngs_modulus / poisson_ratio: units='si' needs both (Pa, and nu in (-1, 0.5])")
+    _positive("youngs_modulus", p.youngs_modulus)
+    nu = _finite("poisson_ratio", p.poisson_ratio)
+    if not -1.0 < nu <= 0.5:
+        raise ParameterError(f"poisson_ratio: must be in (-1, 0.5], got {nu!r}")
+    if p.k_th is not None:
+        raise ParameterError("k_th: with units='si' give work_of_adhesion (J/m^2), from which K_th follows, "
+                             "or an explicit f_th in newtons; k_th is in paper units")
+    if (p.work_of_adhesion is None) == (p.f_th is None):
+        raise ParameterError("work_of_adhesion / f_th: units='si' needs one threshold: work_of_adhesion "
+                             "(J/m^2) or f_th (N), not both")
+    if p.work_of_adhesion is not None:
+        if _finite("work_of_adhesion", p.work_of_adhesion) < 0:
+            raise ParameterError(f"work_of_adhesion: must be >= 0 (J/m^2), got {p.work_of_adhesion!r}")
+        if p.alpha != 0.75:
+            raise ParameterError(f"alpha: must be 0.75 with work_of_adhesion (K_th = pi sqrt(3 G gamma/"
+                                 f"(c (1 - nu))) holds for F_th = K_th A^0.75), got {p.alpha!r}")
+    if p.kernel != "boussinesq":
+        raise ParameterError(f"kernel: units='si' needs the elastic half-space kernel 'boussinesq' "
+                             f"(the others are not elastic bodies with a modulus), got {p.kernel!r}")
+    mixed = " with units='si' every length is in metres (paper-unit values mixed in?)"
+    if p.shape != "height_map" and p.spacing >= p.radius:
+        raise ParameterError(f"spacing: must be < radius ({p.radius:g} m), got {p.spacing!r};{mixed}")
+    try:
+        dmax = p.delta_max
+    except ParameterError as exc:
+        raise ParameterError(f"{exc};{mixed}") from None
+    if p.step > dmax:
+        raise ParameterError(f"step: must be <= max_indent ({dmax:g} m), got {p.step!r};{mixed}")

@@ -77,8 +77,10 @@ class RunResult:
     def write_curve(self, path: str | os.PathLike) -> Path:
         """Write the curve table; field snapshots, if any, move beside it as
         ``<stem>.fields.nc`` and the table's metadata names them (``fields``)."""
+        from .units import unit_labels
+
         path = Path(path)
-        extra = None
+        extra = {"units": unit_labels(self.params)}
         if self.fields_path is not None:
             dest = fields_path_for(path)
             if Path(self.fields_path).resolve() != dest.resolve():
@@ -88,7 +90,7 @@ class RunResult:
                 shutil.move(str(self.fields_path), tmp)
                 os.replace(tmp, dest)
                 self.fields_path = dest
-            extra = {"fields": dest.name}
+            extra["fields"] = dest.name
         return write_table(self.curve, path, self.params, self.provenance, self.summary, extra=extra)
 
 

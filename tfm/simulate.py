@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import warnings
 
+import numpy as np
+
 from .geometry import heights, make_layout
 from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
@@ -10,6 +12,7 @@ from .params import Params
 from .results import RunResult, curve_frame, provenance, summarize
 from .solver import Problem
 from .threshold import threshold_forces
+from .units import to_paper, to_si_curve, to_si_summary, unit_labels
 
 
 class RunWarning(UserWarning):
@@ -23,7 +26,10 @@ def build_problem(p: Params) -> tuple[Problem, object]:
     check_positive_definite(p, spec, layout, symbol)
     op = make_operator(p, spec, layout, symbol)
     pre = make_preconditioner(p, spec, layout, symbol, op)
-    prob = Problem(x0=heights(p, layout), f_th=threshold_forces(p, layout.area), area=layout.area, edge=layout.edge,
+    # A height map is a finite body whose edge is the map's: contact there is physical,
+    # not a sign of a too-small grid.
+    edge = np.zeros_like(layout.edge) if p.shape == "height_map" else layout.edge
+    prob = Problem(x0=heights(p, layout), f_th=threshold_forces(p, layout.area), area=layout.area, edge=edge,
                    operator=op, precond=pre, tol=p.tol, max_iter=p.max_iter,
                    max_rounds=p.max_rounds, snap_rule=p.snap_rule)
     return prob, layout
@@ -46,13 +52,15 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, **over
     for note in notes:
         warnings.warn(f"run {p.run_id}: {note}", RunWarning, stacklevel=2)
     prov = provenance()
-    prob, layout = build_problem(p)
+    # an SI record is solved as its paper-units twin (tfm.units, L* = 1 m), then scaled back
+    q = to_paper(p)
+    prob, layout = build_problem(q)
     writer = None
     if p.snapshots != "none":
         from .snapshots import SnapshotWriter, temporary_fields_path
 
         fields_path = fields_path or temporary_fields_path()
-        writer = SnapshotWriter(fields_path, p, layout, prob)
+        writer = SnapshotWriter(fields_path, q, layout, prob)   # fields in paper units
 
     def observe(state, rec):
         if writer is not None:
@@ -61,9 +69,13 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, **over
             progress(rec)
 
     try:
-        out = protocol.run(p, prob, observe)
+        out = protocol.run(q, prob, observe)
         curve = curve_frame(out.steps)
-        summary = summarize(curve, out, p, layout.n, layout.shape[0] if layout.shape else None)
+        summary = summarize(curve, out, q, layout.n, layout.shape[0] if layout.shape else None)
+        if p.units == "si":
+            curve, summary = to_si_curve(curve, p), to_si_summary(summary, p)
+        labels = unit_labels(p)
+        summary["length_unit"], summary["force_unit"] = labels["length"], labels["force"]
         summary["warnings"] = "; ".join(filter(None, notes + [summary["warnings"]]))
         if writer is not None:
             writer.close(summary)

@@ -15,6 +15,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import DECISION_SLACK
+from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, PRE_DIAGONAL, PRE_FFT,
+                              PRE_NONE, PRE_STENCIL, S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS,
+                              S_ROUNDS, S_SNAPPED, S_SOLVES, field_from_set, snap_rounds,
+                              solve_on_set)
+from .kernels.fft import fast_len
 from .kernels.grid import blocked_dot
 
 
@@ -77,6 +82,7 @@ class Problem:
     max_iter: int
     max_rounds: int
     snap_rule: str          # "batch" (paper) or "single"
+    skip_solves: bool = False  # predict F on an unchanged set (bench: no gain at 1/128)
 
 
 @dataclass
@@ -107,7 +113,12 @@ class CurveResult:
 
 
 class ContactState:
-    """Contact set, forces and displacements, advanced one dilatation step at a time."""
+    """Contact set, forces and displacements, advanced one dilatation step at a time.
+
+    ``F``, ``u`` and ``contact`` are full-grid NumPy arrays, valid after each advance. On
+    the square grid with the FFT operator the rounds of a step run compiled
+    (tfm.kernels.contact: no return to Python per CG iteration or per round); other
+    operators (direct, tree) run the same algorithm in Python around their compiled sums."""
 
     def __init__(self, prob: Problem):
         self.prob = prob
@@ -119,7 +130,112 @@ class ContactState:
         self._slope = None
         self._uslope = None
         self._last_d = None
+        # skip-the-solve state: a solution on the current set (base) and the set's unit
+        # response; _set_id counts contact-set changes
+        self.skip_solves = prob.skip_solves
+        self._set_id = 0
+        self._base = None
+        self._unit = None
+        self._unit_set = -1
+        op = prob.operator
+        self._compiled = getattr(op, "name", "") == "fft" and hasattr(op, "syms")
+        if self._compiled:
+            self._setup_compiled()
 
+    # ------------------------------------------------------------------ compiled path
+    def _setup_compiled(self):
+        prob, op = self.prob, self.prob.operator
+        n = op.n
+        P = fast_len(2 * n - 1)
+        self._sym_full = op.symbols(P)[0]
+        # work buffers of the whole-grid field u = C F (reused every solve)
+        self._src = np.zeros((n, n))
+        self._spec = np.zeros((n, P // 2 + 1), dtype=np.complex128)
+        self._out = np.empty((n, P))
+        pre = prob.precond
+        name = getattr(pre, "name", "none") if pre is not None else "none"
+        self._pre = {"none": PRE_NONE, "diagonal": PRE_DIAGONAL, "fft": PRE_FFT,
+                     "stencil": PRE_STENCIL}[name]
+        self._stencil = getattr(pre, "stencil", np.zeros((1, 1)))
+        self._x0 = np.ascontiguousarray(prob.x0, dtype=float)
+        self._f_th = np.ascontiguousarray(prob.f_th, dtype=float)
+
+    def _rounds_compiled(self, d, guess, u_guess, out, solved=False):
+        prob, op = self.prob, self.prob.operator
+        stats = np.zeros(N_STATS, dtype=np.int64)
+        fstats = np.array([out.max_residual, 0.0, 0.0])
+        guess = np.array(guess, dtype=float)             # overwritten by the rounds
+        ug = self.u if u_guess is None else np.ascontiguousarray(u_guess)
+        snap_rounds(float(d), self.contact, self.F, self.u, guess, ug, u_guess is not None, solved,
+                    self._x0, self._f_th, op.n, op.spacing, op.cut2, op.diag, op.syms, op.isyms,
+                    self._pre, self._stencil, self._sym_full, self._src, self._spec, self._out,
+                    prob.tol, prob.max_iter, prob.max_rounds, prob.snap_rule == "single",
+                    DECISION_SLACK, stats, fstats)
+        out.max_residual = float(fstats[F_MAX_RES])
+        out.n_solves += int(stats[S_SOLVES])
+        out.solver_failures += int(stats[S_FAILURES])
+        out.rounds_exceeded += int(stats[S_EXCEEDED])
+        if stats[S_SOLVES] > 0:
+            # the step ended on a real solve: the base of later predictions on this set
+            self._base = (self.F.copy(), self.u.copy(), float(d),
+                          float(fstats[F_LAST_RES] * fstats[F_LAST_BNORM]))
+        return (int(stats[S_ROUNDS]), int(stats[S_ITERS]), int(stats[S_SNAPPED]),
+                int(stats[S_ENTERED]))
+
+    def _solve_unit(self):
+        """x with C_SS x = 1 on the contact set (0 off it), its field w = C x on the grid,
+        and ||1 - C_SS x||; warm-started from the last step's dF/dd."""
+        prob, op = self.prob, self.prob.operator
+        idx = np.flatnonzero(self.contact)
+        x, w = np.zeros(self.F.size), np.zeros(self.F.size)
+        if idx.size == 0:
+            return x, w, 0.0, 0
+        ones = np.ones(idx.size)
+        xs = self._slope[idx].copy() if self._slope is not None else np.zeros(idx.size)
+        it, conv, res = solve_on_set(idx, ones, xs, ones, False, op.n, op.spacing, op.cut2, op.diag,
+                                     op.syms, op.isyms, self._pre, self._stencil, prob.tol,
+                                     prob.max_iter)
+        x[idx] = xs
+        field_from_set(idx, xs, op.n, self._sym_full, self._src, self._spec, self._out, w)
+        return x, w, res * np.sqrt(idx.size), it
+
+    def unit_response(self) -> np.ndarray:
+        """dF/dd on the current contact set: the full-grid solution of C_SS x = 1 on the
+        set, zero off it (F is linear in d while the set is fixed: F(d) = F(d0) + (d - d0) x)."""
+        if self._unit is None or self._unit_set != self._set_id:
+            if not self._compiled:
+                return self._unit_python()
+            self._unit = self._solve_unit()
+            self._unit_set = self._set_id
+        return self._unit[0].copy()
+
+    def _unit_python(self):
+        prob, op = self.prob, self.prob.operator
+        idx = np.flatnonzero(self.contact)
+        x = np.zeros(self.F.size)
+        if idx.size:
+            precond = None if prob.precond is None else (lambda r: prob.precond(idx, r))
+            x[idx] = pcg(lambda v: op.apply(idx, v, idx), np.ones(idx.size), np.zeros(idx.size),
+                         precond, prob.tol, prob.max_iter)[0]
+        return x
+
+    def _predict(self, d):
+        """F and u at d from the base solution and the unit response of the unchanged set,
+        if the residual bound ||r_base|| + |d - d_base| ||r_x|| stays within tol ||b||."""
+        if self._base is None or self._unit is None or self._unit_set != self._set_id:
+            return False
+        Fb, ub, db, rb = self._base
+        x, w, rx, _ = self._unit
+        c = d - db
+        idx = np.flatnonzero(self.contact)
+        bnorm = float(np.sqrt(blocked_dot(d - self.prob.x0[idx], d - self.prob.x0[idx])))
+        if rb + abs(c) * rx > self.prob.tol * bnorm:
+            return False
+        np.add(Fb, c * x, out=self.F)
+        np.add(ub, c * w, out=self.u)
+        return True
+
+    # ------------------------------------------------------------------ Python path
     def _solve(self, d, guess, u_guess=None):
         """Solve on the current contact set; ``u_guess`` = C @ guess when known exactly."""
         prob = self.prob
@@ -137,35 +253,11 @@ class ContactState:
         self.F[:] = 0.0
         self.F[idx] = Fc
         # an accepted guess needs no new field: u = C @ guess is already known
-        self.u = u_guess if (u_guess is not None and stats.iters == 0) else op.apply(idx, Fc)
+        self.u[:] = u_guess if (u_guess is not None and stats.iters == 0) else op.apply(idx, Fc)
         return stats
 
-    def unit_response(self) -> np.ndarray:
-        """dF/dd on the current contact set: the solution of C_SS x = 1 on the set S,
-        zero elsewhere. F is linear in d while the set is fixed, so F(d') = F(d) + (d' - d) x."""
+    def _rounds_python(self, d, guess, u_guess, out):
         prob = self.prob
-        x = np.zeros_like(self.F)
-        idx = np.flatnonzero(self.contact)
-        if idx.size == 0:
-            return x
-        precond = None if prob.precond is None else (lambda r: prob.precond(idx, r))
-        xc, _ = pcg(lambda v: prob.operator.apply(idx, v, idx), np.ones(idx.size), np.zeros(idx.size),
-                    precond, prob.tol, prob.max_iter)
-        x[idx] = xc
-        return x
-
-    def advance(self, d: float, k: int, phase: str, out: CurveResult) -> StepRecord:
-        prob = self.prob
-        guess, u_guess = self.F, None
-        if self._slope is not None:
-            # F and u = C F are both linear in d: C (F + c dF) = u + c du. The known field
-            # is the guess's own only if the guess vanishes off the contact set, i.e. no
-            # spring snapped in the last step (a snapped spring's dF is -F/dd).
-            c = d - self._last_d
-            guess = self.F + c * self._slope
-            if not self._slope[~self.contact].any():
-                u_guess = self.u + c * self._uslope
-        start_F, start_u = self.F.copy(), self.u.copy()
         rounds = iters = snapped = entered = 0
         while True:
             stats = self._solve(d, guess, u_guess)
@@ -195,6 +287,35 @@ class ContactState:
             entered += int(into.sum())
             guess = self.F.copy()
             guess[over] = 0.0
+        return rounds, iters, snapped, entered
+
+    # ------------------------------------------------------------------ one step
+    def advance(self, d: float, k: int, phase: str, out: CurveResult) -> StepRecord:
+        prob = self.prob
+        guess, u_guess = self.F, None
+        if self._slope is not None:
+            # F and u = C F are both linear in d: C (F + c dF) = u + c du. The known field
+            # is the guess's own only if the guess vanishes off the contact set, i.e. no
+            # spring snapped in the last step (a snapped spring's dF is -F/dd).
+            c = d - self._last_d
+            guess = self.F + c * self._slope
+            if not self._slope[~self.contact].any():
+                u_guess = self.u + c * self._uslope
+        start_F, start_u = self.F.copy(), self.u.copy()
+        if self._compiled:
+            # Skip the solve while the set is unchanged: F = F_base + (d - d_base) x.
+            solved = self.skip_solves and self._predict(d)
+            rounds, iters, snapped, entered = self._rounds_compiled(d, guess, u_guess, out, solved)
+        else:
+            rounds, iters, snapped, entered = self._rounds_python(d, guess, u_guess, out)
+        if snapped or entered:
+            self._set_id += 1
+        elif self.skip_solves and self._compiled and (self._unit is None or self._unit_set != self._set_id):
+            # the set survived a whole step: its unit response will likely serve the next ones
+            self._unit = self._solve_unit()
+            self._unit_set = self._set_id
+            iters += self._unit[3]
+            out.n_solves += 1
         # dF/dd for the next step's warm start. Exact while the contact set is unchanged
         # (F is linear in d for a fixed set); still a good guess after small changes.
         if self._last_d is not None and d != self._last_d:

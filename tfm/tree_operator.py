@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .kernels.direct import BOUSSINESQ, LOCAL, NEIGHBORS
+from .kernels.compliance import BOUSSINESQ, LOCAL, NEIGHBORS
 from .kernels.tree import (MORTON_BITS, build_nodes, csr_apply, evaluate, morton_keys,
                            node_boxes, node_geometry, node_moments, subset_order)
 

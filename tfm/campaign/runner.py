@@ -15,7 +15,6 @@ import os
 import sys
 import traceback
 import warnings
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
@@ -76,6 +75,13 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo and scheduler is None:
             _check_memory(spec, todo, min(jobs, len(todo)))
+        noted = [run for run in todo if run.notes]
+        if noted and not quiet:
+            for run in noted[:3]:
+                print(f"warning: campaign {spec.name}: run {run.index}: {'; '.join(run.notes)}", file=sys.stderr)
+            if len(noted) > 3:
+                print(f"warning: campaign {spec.name}: {len(noted) - 3} more runs with such notes "
+                      "(they are flagged in the summary)", file=sys.stderr)
         if todo:
             if scheduler is not None:
                 outcomes = _run_dask(todo, scheduler)
@@ -207,13 +213,14 @@ def _death(exitcode) -> str:
     return f"exited with status {exitcode}"
 
 
-MAX_POOL_RESTARTS = 100     # each restart fails at least one run, or counts a strike against it
+MAX_UNPINNED = 3            # pool breakages in a row that no run can be blamed for
 
 
 def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
     """Runs over a spawned process pool. A worker that dies fails its own run, with the
     cause; the pool is rebuilt and the other runs go on (those in flight are redone)."""
     import multiprocessing
+    from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
     workers = min(jobs, len(todo))
@@ -222,11 +229,10 @@ def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
     ctx = multiprocessing.get_context("spawn")
     started = ctx.SimpleQueue()
     remaining = {run.run_id: run for run in todo}
-    strikes: dict[str, int] = {}
-    for _ in range(MAX_POOL_RESTARTS):
-        if not remaining:
-            return
-        pool, procs, futures = _start_pool(ctx, workers, threads, started, remaining.values())
+    unpinned = 0
+    while remaining:
+        pool, procs, futures = _start_pool(ctx, min(workers, len(remaining)), threads, started,
+                                           remaining.values())
         running: dict[int, str] = {}              # worker pid -> the run it said it took
         broken = False
         try:
@@ -253,28 +259,30 @@ def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
         while not started.empty():
             pid, rid = started.get()
             running[pid] = rid
+        pinned = False
         for pid, proc in procs.items():
             rid = running.get(pid)
             if rid in remaining and proc.exitcode not in (0, -15, None):   # -15: the pool's SIGTERM
+                pinned = True
                 run = remaining.pop(rid)
                 yield run, Outcome(error=f"WorkerDied: the worker process (pid {pid}) running this "
                                          f"run {_death(proc.exitcode)}",
                                    traceback=f"worker pid {pid} {_death(proc.exitcode)} while running "
                                              f"{rid}; the pool was rebuilt and the other runs went on")
-        # a death we could not pin on a run: every run that was in flight gets a strike,
-        # and one with two strikes fails, so a run that always kills its worker ends
-        for rid in set(running.values()) & set(remaining):
-            strikes[rid] = strikes.get(rid, 0) + 1
-            if strikes[rid] >= 2:
-                yield remaining.pop(rid), Outcome(
-                    error="WorkerDied: a worker process died twice while this run was in flight",
-                    traceback="the pool broke twice with this run in flight")
+        # a death that cannot be pinned on a run (the worker died before it said what it
+        # took): rebuild and go on, but not forever
+        unpinned = unpinned + 1 if not pinned else 0
+        if unpinned >= MAX_UNPINNED:
+            break
     for run in list(remaining.values()):
-        yield run, Outcome(error="WorkerDied: the process pool kept breaking; not run")
+        yield run, Outcome(error=f"WorkerDied: the process pool broke {MAX_UNPINNED} times in a row "
+                                 "without a run to blame; not run")
 
 
 def _start_pool(ctx, workers: int, threads: int, started, runs):
     """A pool with its workers started; returns (pool, {pid: process}, {future: run})."""
+    from concurrent.futures import ProcessPoolExecutor
+
     # The workers start during the submits below, with NUMBA_NUM_THREADS already set,
     # so Numba starts only `threads` threads in each; the initializer sets it again.
     saved = os.environ.get("NUMBA_NUM_THREADS")

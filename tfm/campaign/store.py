@@ -91,8 +91,13 @@ class CampaignStore:
         (the short wait covers a killed runner's children that are still exiting)."""
         import fcntl
 
-        self.root.mkdir(parents=True, exist_ok=True)
-        with open(self.root / ".lock", "a+") as fh:
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+            fh = open(self.root / ".lock", "a+")
+        except OSError as exc:                # before any run: say where, not a traceback
+            raise CampaignError(f"results-dir: cannot write the campaign folder {self.root}: "
+                                f"{exc.strerror or exc}") from None
+        with fh:
             deadline = time.monotonic() + wait
             while True:
                 try:
@@ -254,7 +259,9 @@ class CampaignStore:
             fails.append({"run_id": rid, **param_columns(by_id[rid].params),
                           "error": rec.get("error", ""), "traceback": rec.get("traceback", ""),
                           "host": rec.get("host", ""), "failed_at": rec.get("failed_at", "")})
-        extra = {"campaign": record}
+        from ..units import COLUMN_UNITS
+        # per row, p_units says which system applies (r_length_unit, r_force_unit too)
+        extra = {"campaign": record, "units": COLUMN_UNITS}
         summary_df = _typed_frame(rows, ["run_id", "status", "fields_path"] + param_names())
         curves_df = (pd.concat(curves, ignore_index=True) if curves
                      else pd.DataFrame({"run_id": pd.Series([], dtype=object)}))

@@ -1,7 +1,6 @@
 """Direct O(N_src * N_tgt) compliance sums, parallel over targets.
 
-Kernel codes: 0 Boussinesq 1/r; 1 local (diagonal only); 2 Boussinesq truncated at
-``cutoff``. The diagonal C_ii comes per spring in ``diag``. Each target's sum runs over
+Kernel codes and the truncation rule: tfm.kernels.compliance. The diagonal C_ii comes per spring in ``diag``. Each target's sum runs over
 the sources in a fixed order, so results do not depend on the thread count. The inner
 loop may be vectorized (fastmath 'reassoc'): that fixes a summation order per compiled
 binary, the same for every thread count, and changes sums only at round-off level.
@@ -10,8 +9,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..config import NUMBA_OPTS
-
-BOUSSINESQ, LOCAL, NEIGHBORS = 0, 1, 2
+from .compliance import BOUSSINESQ, LOCAL, NEIGHBORS, cutoff_squared  # noqa: F401 (re-exported)
 
 _VEC = dict(NUMBA_OPTS, parallel=True, fastmath={"reassoc", "contract"})
 
@@ -53,7 +51,6 @@ def direct_sum(x, y, diag, src, f_src, tgt, kind, cutoff):
     if kind == LOCAL:
         out = np.zeros(tgt.size)
     else:
-        cut2 = np.inf if kind == BOUSSINESQ else cutoff * cutoff * (1.0 + 1e-12)
-        out = _pair_sums(x[src], y[src], f_src, x[tgt], y[tgt], cut2)
+        out = _pair_sums(x[src], y[src], f_src, x[tgt], y[tgt], cutoff_squared(kind, cutoff))
     _add_self(out, diag, src, f_src, tgt, x.size)
     return out

@@ -50,7 +50,8 @@ def blocked_dot(a, b):
 
 @njit(**NUMBA_OPTS)
 def index_box(n, idx):
-    """Bounding box (i0, j0, width) of flat indices on an n x n grid."""
+    """Bounding box of flat indices on an n x n grid: top-left (i0, j0), square width w,
+    row count h."""
     i0 = n
     j0 = n
     i1 = -1
@@ -62,21 +63,4 @@ def index_box(n, idx):
         i1 = max(i1, i)
         j0 = min(j0, j)
         j1 = max(j1, j)
-    return i0, j0, max(i1 - i0, j1 - j0) + 1
-
-
-@njit(**NUMBA_OPTS)
-def scatter_box(buf, n, i0, j0, idx, vals):
-    """buf[i - i0, j - j0] = vals for the flat grid indices idx (buf zeroed by caller)."""
-    for k in range(idx.size):
-        f = idx[k]
-        buf[f // n - i0, f % n - j0] = vals[k]
-
-
-@njit(**NUMBA_OPTS)
-def gather_box(box, n, i0, j0, idx):
-    out = np.empty(idx.size)
-    for k in range(idx.size):
-        f = idx[k]
-        out[k] = box[f // n - i0, f % n - j0]
-    return out
+    return i0, j0, max(i1 - i0, j1 - j0) + 1, i1 - i0 + 1

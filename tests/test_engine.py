@@ -1,0 +1,107 @@
+"""The compiled contact engine (tfm.kernels.contact) against its slow twins.
+
+* the dense reference (np.linalg.solve on the dense C, tests/naive.py) at 1/64;
+* the old Python engine (tests/reference_engine.py, run live) at 1/128;
+* the dense solve of C_SS x = 1 for ContactState.unit_response;
+* itself on 1 and 2 threads (bitwise), on a grid large enough for threaded transforms.
+"""
+import numba
+import numpy as np
+import pytest
+
+from naive import algorithm1_dense
+from reference_engine import reference_curve
+from tfm import Params, simulate
+from tfm.geometry import heights, make_layout
+from tfm.operators import kernel_spec
+from tfm.simulate import build_problem
+from tfm.solver import ContactState, CurveResult
+
+STANDARD = dict(alpha=0.75, k_th=0.02, radius=1.0, shape="paraboloid", max_indent=0.05, step=2.5e-4)
+
+
+def dense_compliance(layout, spec):
+    """C_ij = 1/r_ij, C_ii = diag (the double loop of naive.py, vectorized for N ~ 1500)."""
+    r = np.hypot(layout.x[:, None] - layout.x[None, :], layout.y[:, None] - layout.y[None, :])
+    np.fill_diagonal(r, 1.0)
+    C = 1.0 / r
+    np.fill_diagonal(C, spec.diag)
+    return C
+
+
+def test_whole_curve_matches_dense_reference_at_1_64():
+    """The standard curve at 1/64, preloaded to 0.03 in steps of 1.5e-3 to keep the dense
+    solves short (1089 springs, contact sets up to ~400)."""
+    p = Params.from_dict(dict(STANDARD, spacing="1/64", max_indent=0.03, step=1.5e-3, tol=1e-12))
+    res = simulate(p)
+    layout = make_layout(p)
+    C = dense_compliance(layout, kernel_spec(p, layout))
+    ref = algorithm1_dense(C, heights(p, layout), p.k_th * layout.area ** p.alpha,
+                           res.curve["d"].to_numpy())
+    assert np.array_equal(res.curve["n_contact"].to_numpy(), ref[:, 2])
+    # solve tolerance 1e-12 relative; condition number of C_SS ~ 10^2: forces to 1e-9
+    assert np.allclose(res.curve["force"], ref[:, 1], rtol=0, atol=1e-9 * np.abs(ref[:, 1]).max())
+
+
+def test_whole_curve_matches_the_old_engine_at_1_128():
+    """Every step's contact count equals the old Python engine's, run live."""
+    p = Params.from_dict(dict(STANDARD, spacing="1/128"))
+    res = simulate(p)
+    old = reference_curve(p)
+    assert np.array_equal(res.curve["n_contact"].to_numpy(), [s.n_contact for s in old.steps])
+    f_old = np.array([s.force for s in old.steps])
+    pull_old = max(float((-f_old).max()), 0.0)
+    # both solve to tol 1e-10 with the same decisions; the pull-off is a sum of forces
+    # each within ~1e-10 relative, so 1e-6 leaves four orders of margin
+    assert res.summary["pull_off_force"] == pytest.approx(pull_old, rel=1e-6)
+
+
+def test_unit_response_solves_c_ss_x_equals_one():
+    p = Params.from_dict(dict(STANDARD, spacing="1/32", max_indent=0.02, step=2e-3, tol=1e-12))
+    prob, layout = build_problem(p)
+    state = ContactState(prob)
+    out = CurveResult()
+    for k, d in enumerate((-0.005, -0.01, -0.02)):
+        state.advance(d, k, "load", out)
+    x = state.unit_response()
+    idx = np.flatnonzero(state.contact)
+    C = dense_compliance(layout, kernel_spec(p, layout))
+    ref = np.linalg.solve(C[np.ix_(idx, idx)], np.ones(idx.size))
+    assert np.all(x[~state.contact] == 0.0)
+    # tol 1e-12 on a system of condition ~10^2
+    assert np.allclose(x[idx], ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+    # F is linear in d on a fixed set: the next step, if the set stays, moves by c x
+    F0 = state.F.copy()
+    rec = state.advance(-0.0201, 3, "load", out)
+    if rec.n_snapped == rec.n_entered == 0:
+        assert np.allclose(state.F, F0 - 1e-4 * x, rtol=0, atol=1e-9 * np.abs(F0).max())
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs 2 Numba threads")
+@pytest.mark.parametrize("skip", [False, True])
+def test_compiled_engine_is_bitwise_independent_of_thread_count(skip):
+    """A 301 x 301 grid: the whole-grid transform (P = 640) takes the threaded path."""
+    p = Params.from_dict(dict(STANDARD, spacing="1/128", extent=1.17, max_indent=0.01, step=1e-3))
+    prob, layout = build_problem(p)
+    prob.skip_solves = skip
+    before = numba.get_num_threads()
+    runs = []
+    try:
+        for nt in (1, 2):
+            numba.set_num_threads(nt)
+            state, out = ContactState(prob), CurveResult()
+            recs = [state.advance(-0.001 * (k + 1), k, "load", out) for k in range(10)]
+            runs.append((state.F.copy(), state.u.copy(), [r.force for r in recs]))
+    finally:
+        numba.set_num_threads(before)
+    assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
+    assert runs[0][2] == runs[1][2]
+
+
+@pytest.mark.slow
+def test_pull_off_at_1_512_is_converged_in_the_tolerance():
+    p = Params.from_dict(dict(STANDARD, spacing="1/512"))
+    a = simulate(p).summary["pull_off_force"]
+    b = simulate(p.replace(tol=1e-12)).summary["pull_off_force"]
+    # decisions carry a slack of 10 tol; at tol 1e-10 the pull-off must not move by 1e-5
+    assert a == pytest.approx(b, rel=1e-5)

@@ -1,0 +1,341 @@
+"""Rough surfaces (tfm.surfaces): the generator's statistics, seeds, SurfaceTopography,
+height maps, threshold disorder and the early refusal of bad input."""
+import math
+
+import numpy as np
+import pytest
+
+from tfm.geometry import heights, make_layout
+from tfm.params import ParameterError, Params
+from tfm.surfaces import (fourier_synthesis, psd_exponent, radial_psd, sample, self_affine_psd,
+                          spectral_rms_slope, wavevectors)
+from tfm.threshold import disorder_factors, mean_threshold, threshold_forces, weibull_modulus
+
+N = 512
+DX = 1.0 / N
+
+
+@pytest.mark.parametrize("hurst", [0.3, 0.8])
+@pytest.mark.parametrize("target", ["rms_slope", "rms_height"])
+def test_psd_exponent_and_rms(hurst, target):
+    short, long = 4 * DX, N * DX / 4
+    h = fourier_synthesis(N, DX, hurst, short_cutoff=short, long_cutoff=long, seed=7, **{target: 0.3})
+    # One realization's log-binned PSD between the cutoffs: over 10 seeds the fitted
+    # exponent scatters by +-0.04 around -2-2H; the issue's bound is 0.1.
+    slope = psd_exponent(h, DX, 2 * np.pi / long, 2 * np.pi / short)
+    assert abs(slope - (-2 - 2 * hurst)) < 0.1
+    # each realization is rescaled to the request, so it holds to round-off (the issue
+    # asks 2 %; 1e-9 leaves room for the FFT's rounding only)
+    got = spectral_rms_slope(h, DX) if target == "rms_slope" else float(np.sqrt(np.mean(h ** 2)))
+    assert got == pytest.approx(0.3, rel=1e-9)
+    assert abs(h.mean()) < 1e-12
+
+
+def test_rms_slope_is_spectral_and_finite_differences_are_close():
+    h = fourier_synthesis(256, 1 / 256, 0.8, rms_slope=1.0, short_cutoff=8 / 256, seed=3)
+    gx = (np.roll(h, -1, 0) - np.roll(h, 1, 0)) * 128
+    gy = (np.roll(h, -1, 1) - np.roll(h, 1, 1)) * 128
+    fd = math.sqrt(float(np.mean(gx ** 2 + gy ** 2)))
+    # central differences of a wave of 8 spacings keep sin(2pi/8)/(2pi/8) = 0.90 of its
+    # slope; the PSD-weighted loss over the band is a few per cent, never a gain
+    assert 0.9 < fd < 1.0
+
+
+def test_same_seed_same_surface_bit_for_bit():
+    kw = dict(short_cutoff=4 * DX, long_cutoff=0.5, rolloff=0.3)
+    a = fourier_synthesis(N, DX, 0.8, rms_height=1.0, seed=11, **kw)
+    b = fourier_synthesis(N, DX, 0.8, rms_height=1.0, seed=11, **kw)
+    c = fourier_synthesis(N, DX, 0.8, rms_height=1.0, seed=12, **kw)
+    assert np.array_equal(a, b)
+    assert not np.allclose(a, c)
+    # the rms only rescales the surface of a seed
+    d = fourier_synthesis(N, DX, 0.8, rms_height=2.0, seed=11, **kw)
+    np.testing.assert_allclose(d, 2 * a, rtol=1e-12, atol=1e-12)
+
+
+def test_psd_shape_follows_cutoffs_and_rolloff():
+    q = np.array([1.0, 5.0, 10.0, 20.0, 40.0, 90.0])
+    psd = self_affine_psd(q, 0.5, short_cutoff=2 * np.pi / 50, long_cutoff=2 * np.pi / 10, rolloff=0.5)
+    assert psd[-1] == 0.0                                  # above q_s
+    assert psd[0] == psd[1] == pytest.approx(0.25 * 10.0 ** -3)   # rolloff^2 C(q_L)
+    assert psd[3] / psd[4] == pytest.approx(2.0 ** 3)      # q^(-2-2H), H = 0.5
+
+
+@pytest.mark.parametrize("hurst", [0.3, 0.8])
+def test_matches_surface_topography_fourier_synthesis(hurst):
+    st = pytest.importorskip("SurfaceTopography.Generation")
+    n, L = 256, 1.0
+    dx = L / n
+    kw = dict(short_cutoff=8 * dx, long_cutoff=L / 4, rolloff=0.5)
+    reps = 6
+    q = wavevectors(n, dx).ravel()
+    edges = np.geomspace(2 * np.pi / L, 2 * np.pi / kw["short_cutoff"], 13)
+    which = np.digitize(q, edges) - 1
+    keep = (which >= 0) & (which < 12)
+    modes = np.bincount(which[keep], minlength=12)
+
+    def binned(h):
+        C = (dx ** 2 * np.abs(np.fft.fft2(h - h.mean())) ** 2 / n ** 2).ravel()
+        return np.bincount(which[keep], weights=C[keep], minlength=12) / np.maximum(modes, 1)
+
+    ours = np.mean([binned(fourier_synthesis(n, dx, hurst, rms_slope=0.1, seed=s, **kw))
+                    for s in range(reps)], axis=0)
+    theirs = np.mean([binned(st.fourier_synthesis((n, n), (L, L), hurst, rms_slope=0.1, rng=100 + s,
+                                                  **kw).heights()) for s in range(reps)], axis=0)
+    ok = modes >= 8
+    ratio = ours[ok] / theirs[ok]
+    # A bin's mean PSD over m modes (m/2 independent complex coefficients, +-q are
+    # conjugate) and `reps` surfaces has relative scatter sqrt(2 / (m reps)); a ratio of
+    # two such means sqrt(2) times that. Four standard deviations per bin:
+    sigma = np.sqrt(2.0) * np.sqrt(2.0 / (modes[ok] * reps))
+    assert np.all(np.abs(np.log(ratio)) < 4 * sigma + 0.02), (ratio, sigma)
+    # and the same overall level: tfm fixes each realization's rms slope, SurfaceTopography
+    # its expectation; their realized slopes scatter by about 1 %
+    assert np.exp(np.mean(np.log(ratio))) == pytest.approx(1.0, abs=0.05)
+
+
+def test_radial_psd_of_a_single_wave():
+    n = 64
+    x = np.arange(n) / n
+    h = np.sin(2 * np.pi * 4 * x)[:, None] * np.ones(n)[None, :]
+    q, C = radial_psd(h, 1 / n)
+    # bins are pi/spacing/(n/2) = 2 pi wide; the peak's bin mean lies within one width
+    assert abs(q[np.argmax(C)] - 2 * np.pi * 4) <= 2 * np.pi
+
+
+# ---- the run's surface ---------------------------------------------------------------
+ROUGH = dict(spacing=1 / 32, k_th=0.02, shape="paraboloid", max_indent=0.05, step=1e-3,
+             rms_height=1e-3, short_cutoff=4 / 32)
+
+
+def test_rough_shape_adds_roughness_and_apex_stays_at_zero():
+    p = Params.from_dict(ROUGH)
+    smooth = Params.from_dict({k: v for k, v in ROUGH.items() if k not in ("rms_height", "short_cutoff")})
+    lay = make_layout(p)
+    x0, x0_smooth = heights(p, lay), heights(smooth, lay)
+    assert x0.max() == 0.0
+    rough = (x0 - x0_smooth) - np.mean(x0 - x0_smooth)
+    assert np.sqrt(np.mean(rough ** 2)) == pytest.approx(1e-3, rel=1e-9)   # square layout: exact
+    # a smooth record is unchanged by the new code path (apex exactly 0, no shift)
+    assert x0_smooth.max() == 0.0 and x0_smooth[lay.x.size // 2] == 0.0
+
+
+def test_rough_flat_punch_and_jittered_layout():
+    p = Params.from_dict(dict(spacing=1 / 16, f_th=0, shape="flat_punch", radius=0.5, max_indent=0.01,
+                              step=1e-3, rms_slope=0.1, layout="jittered", operator="direct"))
+    lay = make_layout(p)
+    x0 = heights(p, lay)
+    inside = np.isfinite(x0)
+    assert x0[inside].max() == 0.0 and np.all(np.hypot(lay.x, lay.y)[~inside] > 0.5)
+
+
+def test_sample_is_exact_on_pixels_and_bilinear_between():
+    rng = np.random.default_rng(0)
+    h = rng.normal(size=(9, 7))
+    xs = (np.arange(9) - 4) * 0.1
+    ys = (np.arange(7) - 3) * 0.1
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    np.testing.assert_array_equal(sample(h, 0.1, X.ravel(), Y.ravel()), h.ravel())
+    plane = 2.0 * X - 3.0 * Y + 1.0
+    pts = rng.uniform(-0.3, 0.3, size=(2, 50))
+    np.testing.assert_allclose(sample(plane, 0.1, pts[0], pts[1]), 2 * pts[0] - 3 * pts[1] + 1, rtol=1e-12)
+
+
+# ---- height maps -----------------------------------------------------------------------
+def _map(tmp_path, name="m.npy", n=41, seed=0, array=None):
+    path = tmp_path / name
+    if array is None:
+        array = fourier_synthesis(n, 1 / 32, 0.8, rms_height=1e-3, seed=seed)
+    np.save(path, array)
+    return str(path)
+
+
+def test_height_map_run_id_follows_content_not_path(tmp_path):
+    a = _map(tmp_path, "a.npy")
+    b = _map(tmp_path, "b.npy")                 # same heights, other file
+    c = _map(tmp_path, "c.npy", seed=1)
+    kw = dict(shape="height_map", spacing=1 / 32, f_th=0.0, max_indent=1e-3, step=1e-4)
+    pa, pb, pc = (Params(height_map=m, **kw) for m in (a, b, c))
+    assert pa.height_map_hash == pb.height_map_hash != pc.height_map_hash
+    assert pc.run_id != pa.run_id
+    # rebuilt from its own record (a table row), the same run; after the file changed, refused
+    assert Params.from_dict(pa.to_dict()).run_id == pa.run_id
+    np.save(a, np.zeros((41, 41)))
+    with pytest.raises(ParameterError, match="height_map: the content .* changed"):
+        Params.from_dict(pa.to_dict())
+    assert pa.replace(height_map=c).height_map_hash == pc.height_map_hash
+
+
+def test_height_map_lands_on_springs_and_interpolates(tmp_path):
+    arr = np.random.default_rng(1).normal(size=(21, 21)) * 1e-3
+    m = _map(tmp_path, array=arr)
+    p = Params(shape="height_map", height_map=m, spacing=1 / 32, f_th=0, max_indent=1e-3, step=1e-4,
+               map_pixel_size=1 / 32)
+    assert p.half_width == pytest.approx(10 / 32)
+    x0 = heights(p, make_layout(p))
+    np.testing.assert_allclose(x0, arr.ravel() - arr.max(), rtol=0, atol=1e-15)
+    # a map of a plane with a finer pixel: bilinear interpolation is exact for planes
+    xs = (np.arange(81) - 40) / 128
+    plane = 0.01 * xs[:, None] + 0.02 * xs[None, :]
+    q = Params(shape="height_map", height_map=_map(tmp_path, "plane.npy", array=plane), spacing=1 / 32,
+               f_th=0, max_indent=1e-3, step=1e-4, map_pixel_size=1 / 128)
+    lay = make_layout(q)
+    expect = 0.01 * lay.x + 0.02 * lay.y
+    np.testing.assert_allclose(heights(q, lay), expect - expect.max(), atol=1e-15)
+
+
+@pytest.mark.parametrize("array, match", [
+    (np.zeros((5, 5, 2)), "2-D"),
+    (np.full((41, 41), np.nan), "NaN"),
+    (np.zeros((9, 9)), "smaller than the grid"),
+])
+def test_bad_height_maps_are_refused(tmp_path, array, match):
+    m = _map(tmp_path, array=array)
+    with pytest.raises(ParameterError, match=match):
+        Params(shape="height_map", height_map=m, spacing=1 / 32, f_th=0, max_indent=1e-3, step=1e-4,
+               extent=0.5)
+
+
+def test_missing_map_and_map_without_shape(tmp_path):
+    with pytest.raises(ParameterError, match="height_map: no such file"):
+        Params(shape="height_map", height_map=str(tmp_path / "nope.npy"), f_th=0, max_indent=1e-3, step=1e-4)
+    with pytest.raises(ParameterError, match="height_map: shape='height_map' needs"):
+        Params(shape="height_map", f_th=0, max_indent=1e-3, step=1e-4)
+    with pytest.raises(ParameterError, match="height_map: applies only to shape='height_map'"):
+        Params(height_map=_map(tmp_path))
+    with pytest.raises(ParameterError, match="max_indent: 'auto'"):
+        Params(shape="height_map", height_map=_map(tmp_path), f_th=0)
+
+
+# ---- bad roughness input ---------------------------------------------------------------
+@pytest.mark.parametrize("changes, match", [
+    (dict(hurst=0.0), r"hurst: must be in \(0, 1\)"),
+    (dict(hurst=1.0), r"hurst: must be in \(0, 1\)"),
+    (dict(short_cutoff=1.5 / 32), "short_cutoff: must be >= 2 spacings"),
+    (dict(short_cutoff=0.3, long_cutoff=0.2), "short_cutoff: must be < long_cutoff"),
+    (dict(rms_height=-1e-3), "rms_height: must be >= 0"),
+    (dict(rms_height=0.0, rms_slope=-0.1), "rms_slope: must be >= 0"),
+    (dict(rms_slope=0.1), "rms_slope / rms_height: give one"),
+    (dict(rolloff=-1.0), "rolloff: must be >= 0"),
+    (dict(long_cutoff=5.0), "long_cutoff: must be <= the grid side"),
+    (dict(max_indent="auto"), "max_indent: 'auto' assumes a smooth body"),
+])
+def test_bad_roughness_fails_early(changes, match):
+    with pytest.raises(ParameterError, match=match):
+        Params.from_dict({**ROUGH, **changes})
+
+
+def test_roughness_parameters_need_roughness(tmp_path):
+    with pytest.raises(ParameterError, match="roughness_seed: 3 has no effect .* the surface is rough"):
+        Params(roughness_seed=3)
+    with pytest.raises(ParameterError, match="disorder_width: 0.1 has no effect .* threshold_disorder is"):
+        Params(disorder_width=0.1)
+    with pytest.raises(ParameterError, match="radius: 2.0 has no effect .* shape is 'sphere'"):
+        Params(shape="height_map", height_map=_map(tmp_path), radius=2.0, f_th=0.0, max_indent=1e-3, step=1e-4)
+
+
+# ---- threshold disorder ----------------------------------------------------------------
+@pytest.mark.parametrize("kind, width", [("uniform", 0.3), ("weibull", 0.3), ("weibull", 1.0)])
+def test_disorder_mean_one_and_requested_spread(kind, width):
+    xi = disorder_factors(kind, width, seed=5, n=200_000)
+    # 2e5 samples: the sample mean and std scatter by ~width/450 and ~width/300; 1 % of
+    # the mean and 3 % of the width is over 4 standard errors
+    assert xi.mean() == pytest.approx(1.0, abs=0.01)
+    assert xi.std() == pytest.approx(width, rel=0.03)
+    assert xi.min() >= 0.0
+    np.testing.assert_array_equal(xi, disorder_factors(kind, width, seed=5, n=200_000))
+
+
+def test_weibull_modulus_inverts_the_coefficient_of_variation():
+    for m in (0.8, 1.0, 3.0, 10.0):
+        cv = math.sqrt(math.gamma(1 + 2 / m) / math.gamma(1 + 1 / m) ** 2 - 1)
+        assert weibull_modulus(cv) == pytest.approx(m, rel=1e-8)
+
+
+def test_threshold_forces_carry_the_disorder():
+    p = Params(spacing=1 / 16, f_th=2e-4, threshold_disorder="uniform", disorder_width=0.2, disorder_seed=1)
+    lay = make_layout(p)
+    f = threshold_forces(p, lay.area)
+    assert mean_threshold(p) == 2e-4
+    np.testing.assert_allclose(f, 2e-4 * disorder_factors("uniform", 0.2, 1, lay.n))
+    with pytest.raises(ParameterError, match=r"disorder_width: must be in \(0, 0.5774\]"):
+        Params(f_th=2e-4, threshold_disorder="uniform", disorder_width=0.7)
+    with pytest.raises(ParameterError, match="threshold_disorder: unknown value"):
+        Params(threshold_disorder="gauss", disorder_width=0.1)
+    assert Params.from_dict({"threshold_disorder": None}).threshold_disorder == "none"
+
+
+# ---- ensembles over seeds ----------------------------------------------------------------
+def _shoelace(x, y):
+    """Signed area of the closed polygon (x, y), counter-clockwise positive."""
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def test_hysteresis_is_the_loop_area():
+    import pandas as pd
+    from tfm.analysis import hysteresis
+    # load along P = d^2 to d = 1, unload along P = d^3 - 0.1 sin(pi d) past zero force
+    up = np.linspace(0, 1, 201)[1:]
+    down = np.linspace(1, -0.2, 241)[1:]
+    indent = np.concatenate([up, down])
+    force = np.concatenate([up ** 2, down ** 3 - 0.1 * np.sin(np.pi * down)])
+    force[-1] = 0.0
+    curve = pd.DataFrame({"indent": indent, "force": force})
+    path_x, path_y = np.concatenate([[0.0], indent]), np.concatenate([[0.0], force])
+    # the polygon closes along P = 0, which adds nothing to the integral of P d(delta);
+    # the path runs clockwise in (delta, P), so its signed area is minus the dissipation
+    assert hysteresis(curve) == pytest.approx(-_shoelace(path_x, path_y), rel=1e-12)
+
+
+def test_ensemble_stats_mean_and_spread_over_seeds():
+    import pandas as pd
+    from tfm.analysis import ensemble_stats
+    rows, curves = [], []
+    for rms in (1e-3, 2e-3):
+        for seed, po in enumerate((0.01, 0.012, 0.014)):
+            rid = f"{rms}-{seed}"
+            rows.append({"run_id": rid, "p_rms_height": rms, "p_roughness_seed": seed, "p_alpha": 0.75})
+            curves.append(pd.DataFrame({"run_id": rid, "indent": [0.1, 0.2, 0.1, 0.0],
+                                        "force": [1.0, 2.0, 0.0, -po * rms * 1000],
+                                        "contact_area": [0.1, 0.3, 0.2, 0.05]}))
+    stats = ensemble_stats(pd.DataFrame(rows), pd.concat(curves))
+    assert list(stats.columns[:2]) == ["p_rms_height", "n"]       # seeds and constants are not groups
+    r = stats.iloc[1]
+    assert r["n"] == 3
+    assert r["pull_off_force_mean"] == pytest.approx(0.024)
+    assert r["pull_off_force_std"] == pytest.approx(0.004)       # sample std, ddof = 1
+    assert r["area_at_max_load_mean"] == pytest.approx(0.3) and r["area_at_max_load_std"] == 0.0
+
+
+def test_rough_campaign_files_expand():
+    from tfm.campaign.spec import load_spec
+    sphere = load_spec("campaigns/rough_sphere.toml")
+    punch = load_spec("campaigns/rough_punch_area_load.toml")
+    assert len(sphere.runs) == 15 and len(punch.runs) == 6
+    assert {r.params.roughness_seed for r in sphere.runs} == {0, 1, 2}
+
+
+def test_rough_run_with_disorder_end_to_end():
+    import tfm
+    p = Params.from_dict(dict(ROUGH, threshold_disorder="weibull", disorder_width=0.3, max_indent=0.02,
+                              step=2e-3))
+    res = tfm.simulate(p)
+    assert res.summary["unload_complete"] and res.summary["pull_off_force"] > 0
+    assert res.curve["indent"].iloc[0] > 0 and res.curve["n_contact"].iloc[0] >= 1
+
+
+def test_surface_topography_file_in_si_units(tmp_path):
+    """A map in a SurfaceTopography format (here NetCDF in micrometres) comes in with its
+    own pixel size and unit, converted to metres."""
+    st = pytest.importorskip("SurfaceTopography")
+    arr = np.random.default_rng(2).normal(size=(40, 40))                 # micrometres
+    st.Topography(arr, (40.0, 40.0), unit="um").to_netcdf(str(tmp_path / "t.nc"))
+    p = Params(units="si", youngs_modulus=1e6, poisson_ratio=0.5, f_th=0.0, shape="height_map",
+               height_map=str(tmp_path / "t.nc"), spacing=1e-6, max_indent=1e-7, step=1e-8)
+    lay = make_layout(p)
+    assert lay.shape == (39, 39)          # centre pixel 19, 19 pixels on its short side
+    x0 = heights(p, lay)
+    # the file stores its sizes in single precision: pixel = 1 um to 3e-8 relative, so the
+    # springs sit that close to the pixels and the heights match to about that
+    expect = arr[0:39, 0:39].ravel() * 1e-6
+    np.testing.assert_allclose(x0, expect - expect.max(), rtol=0, atol=1e-12)

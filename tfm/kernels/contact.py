@@ -1,0 +1,250 @@
+"""Algorithm 1 of the paper (Sec. 2.1) in compiled code: the contact solve (PCG) and the
+snapping rounds of one dilatation step, on the square grid with the FFT operator.
+
+For a fixed contact set S the forces solve C_SS F = d - x0_S (paper, Eq. 1), a symmetric
+positive-definite system. Each solve restricts the operator to S once: the bounding box
+of S, its FFT size P, the symbol and the inverse symbol (the preconditioner, R C^-1 R^T on
+the same box) and the work buffers are set up before the first CG iteration and shared by
+all of them. Dot products are summed in fixed blocks (blocked_dot), the transforms in
+fixed chunks (tfm.kernels.fft), so the iterates do not depend on the number of threads.
+"""
+import numpy as np
+from numba import njit
+
+from ..config import NUMBA_OPTS
+from .fft import convolve, fast_len, symbol
+from .grid import blocked_dot, index_box, stencil_apply
+
+# The FFT preconditioner in single precision (off: at 1/128 it cost 5 % more CG iterations
+# and saved no measurable time on the shared 2-core machine). Only the
+# preconditioner: residuals, operator and iterates stay double (bench/README).
+PRECOND_SINGLE = False
+PRECOND_DTYPE = np.float32 if PRECOND_SINGLE else np.float64
+PRECOND_CDTYPE = np.complex64 if PRECOND_SINGLE else np.complex128
+# preconditioner codes
+PRE_NONE, PRE_DIAGONAL, PRE_FFT, PRE_STENCIL = 0, 1, 2, 3
+# slots of the integer statistics array
+S_SOLVES, S_ITERS, S_FAILURES, S_ROUNDS, S_SNAPPED, S_ENTERED, S_EXCEEDED, S_LAST_ITERS = range(8)
+N_STATS = 8
+# slots of the float statistics array
+F_MAX_RES, F_LAST_RES, F_LAST_BNORM = range(3)
+
+
+@njit(**NUMBA_OPTS)
+def box_symbols(syms, isyms, P, cut2, spacing, diag0):
+    """The symbol and its inverse for box size P, cached in the typed dicts."""
+    if P not in syms:
+        s = symbol(cut2, spacing, diag0, P)
+        syms[P] = s
+        isyms[P] = (1.0 / s).astype(PRECOND_DTYPE)
+    return syms[P], isyms[P]
+
+
+@njit(**NUMBA_OPTS)
+def _box_apply(sym, idx, vals, n, i0, j0, h, box, spec, out, res):
+    """res = C_SS vals (or its inverse-symbol twin) for the springs idx of the box."""
+    box[:h] = 0.0
+    for k in range(idx.size):
+        f = idx[k]
+        box[f // n - i0, f % n - j0] = vals[k]
+    convolve(box, 0, h, spec, out, sym)
+    for k in range(idx.size):
+        f = idx[k]
+        res[k] = out[f // n - i0, f % n - j0]
+
+
+@njit(**NUMBA_OPTS)
+def _precondition(kind, r, z, idx, n, diag, stencil, isym, i0, j0, h, box, spec, out):
+    """z = M r; the FFT inverse runs in the precision of isym and its buffers."""
+    if kind == PRE_FFT:
+        _box_apply(isym, idx, r, n, i0, j0, h, box, spec, out, z)
+    elif kind == PRE_DIAGONAL:
+        for k in range(idx.size):
+            z[k] = r[k] / diag[idx[k]]
+    elif kind == PRE_STENCIL:
+        z[:] = stencil_apply(idx // n, idx % n, r, n, stencil)
+    else:
+        z[:] = r
+
+
+@njit(**NUMBA_OPTS)
+def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, pre, stencil,
+                 tol, max_iter):
+    """PCG for C_SS x = b on the contact set idx (sorted flat indices), from the guess x
+    (overwritten), stopping at ||b - C x|| <= tol ||b||. ``Ax0`` = C x when has_Ax0 saves
+    the first application. Returns (iterations, converged, relative residual)."""
+    m = idx.size
+    bnorm = np.sqrt(blocked_dot(b, b))
+    if bnorm == 0.0:
+        x[:] = 0.0
+        return 0, True, 0.0
+    i0, j0, w, h = index_box(n, idx)
+    P = fast_len(2 * w - 1)
+    sym, isym = box_symbols(syms, isyms, P, cut2, spacing, diag[0])
+    box = np.zeros((w, w))
+    spec = np.zeros((w, P // 2 + 1), dtype=np.complex128)
+    out = np.empty((w, P))
+    pbox = np.zeros((w, w), dtype=isym.dtype)
+    pspec = np.zeros((w, P // 2 + 1), dtype=PRECOND_CDTYPE)
+    pout = np.empty((w, P), dtype=isym.dtype)
+    Ap = np.empty(m)
+    if has_Ax0:
+        r = b - Ax0
+    else:
+        nonzero = False
+        for k in range(m):
+            if x[k] != 0.0:
+                nonzero = True
+                break
+        if nonzero:
+            _box_apply(sym, idx, x, n, i0, j0, h, box, spec, out, Ap)
+            r = b - Ap
+        else:
+            r = b.copy()
+    rnorm = np.sqrt(blocked_dot(r, r))
+    if rnorm <= tol * bnorm:
+        return 0, True, rnorm / bnorm
+    z = np.empty(m)
+    _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout)
+    p = z.copy()
+    rz = blocked_dot(r, z)
+    for it in range(1, max_iter + 1):
+        _box_apply(sym, idx, p, n, i0, j0, h, box, spec, out, Ap)
+        pAp = blocked_dot(p, Ap)
+        if pAp <= 0.0:
+            # only possible if C is not positive definite on this set (checked upstream)
+            return it, False, rnorm / bnorm
+        step = rz / pAp
+        for k in range(m):
+            x[k] += step * p[k]
+            r[k] -= step * Ap[k]
+        rnorm = np.sqrt(blocked_dot(r, r))
+        if rnorm <= tol * bnorm:
+            return it, True, rnorm / bnorm
+        _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout)
+        rz_new = blocked_dot(r, z)
+        beta = rz_new / rz
+        for k in range(m):
+            p[k] = z[k] + beta * p[k]
+        rz = rz_new
+    return max_iter, False, rnorm / bnorm
+
+
+@njit(**NUMBA_OPTS)
+def field_from_set(idx, vals, n, sym_full, src, spec, out, u):
+    """u = C F on the whole n x n grid for forces vals on the springs idx (F = 0 elsewhere).
+
+    The box is the grid itself (width n, P = sym_full.shape[0]); only the rows holding
+    sources are transformed forward."""
+    u[:] = 0.0
+    if idx.size == 0:
+        return
+    r0 = idx[0] // n
+    r1 = idx[idx.size - 1] // n + 1
+    src[r0:r1] = 0.0
+    for k in range(idx.size):
+        src[idx[k] // n, idx[k] % n] = vals[k]
+    convolve(src, r0, r1, spec, out, sym_full)
+    for i in range(n):
+        for j in range(n):
+            u[i * n + j] = out[i, j]
+
+
+@njit(**NUMBA_OPTS)
+def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, n, spacing,
+                cut2, diag, syms, isyms, pre, stencil, sym_full, src, spec, out, tol, max_iter,
+                max_rounds, single, slack, stats, fstats):
+    """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
+    snap every spring above its threshold and bring in every penetrating one (or only the
+    worst, ``single``), until nothing changes or max_rounds is reached.
+
+    contact, F, u are updated in place. ``guess`` is the first solve's guess for F (full
+    grid); ``u_guess`` = C guess when has_u_guess. ``solved``: F and u already hold the
+    solution on the current set (the first solve is skipped). Counts go to ``stats``;
+    ``fstats`` holds the largest relative residual of the solves (updated), then the
+    relative residual and ||b|| of the last solve."""
+    N = n * n
+    first = True
+    while True:
+        if not (first and solved):
+            idx = np.flatnonzero(contact)
+            if idx.size == 0:
+                F[:] = 0.0
+                u[:] = 0.0
+                stats[S_LAST_ITERS] = 0
+                fstats[F_LAST_RES] = 0.0
+                fstats[F_LAST_BNORM] = 0.0
+            else:
+                b = d - x0[idx]
+                Fc = guess[idx]
+                Ax0 = u_guess[idx] if has_u_guess else b
+                it, conv, res = solve_on_set(idx, b, Fc, Ax0, has_u_guess, n, spacing, cut2, diag,
+                                             syms, isyms, pre, stencil, tol, max_iter)
+                stats[S_SOLVES] += 1
+                stats[S_ITERS] += it
+                stats[S_LAST_ITERS] = it
+                if not conv:
+                    stats[S_FAILURES] += 1
+                fstats[F_MAX_RES] = max(fstats[F_MAX_RES], res)
+                fstats[F_LAST_RES] = res
+                fstats[F_LAST_BNORM] = np.sqrt(blocked_dot(b, b))
+                F[:] = 0.0
+                F[idx] = Fc
+                if has_u_guess and it == 0:
+                    # an accepted guess needs no new field: u = C guess is already known
+                    u[:] = u_guess
+                else:
+                    field_from_set(idx, Fc, n, sym_full, src, spec, out, u)
+        first = False
+        has_u_guess = False
+        stats[S_ROUNDS] += 1
+        # Decisions ignore violations at the level of the solve's own error.
+        any_contact = False
+        scale_f = 0.0
+        scale_u = abs(d)
+        for i in range(N):
+            if contact[i]:
+                any_contact = True
+                scale_f = max(scale_f, abs(F[i]))
+            scale_u = max(scale_u, abs(u[i]))
+        slack_f = slack * tol * scale_f
+        slack_u = slack * tol * scale_u
+        n_over = 0
+        n_into = 0
+        worst_over = -1
+        worst_into = -1
+        for i in range(N):
+            if contact[i]:
+                if F[i] > f_th[i] + slack_f:
+                    n_over += 1
+                    if worst_over < 0 or F[i] - f_th[i] > F[worst_over] - f_th[worst_over]:
+                        worst_over = i
+            elif x0[i] + u[i] > d + slack_u:
+                n_into += 1
+                if worst_into < 0 or x0[i] + u[i] > x0[worst_into] + u[worst_into]:
+                    worst_into = i
+        if n_over == 0 and n_into == 0:
+            break
+        if stats[S_ROUNDS] >= max_rounds:
+            stats[S_EXCEEDED] += 1
+            break
+        guess[:] = F
+        if single:
+            # the 'single' rule: change only the worst violator (a snap before an entry)
+            if n_over > 0:
+                contact[worst_over] = False
+                guess[worst_over] = 0.0
+                stats[S_SNAPPED] += 1
+            else:
+                contact[worst_into] = True
+                stats[S_ENTERED] += 1
+            continue
+        for i in range(N):
+            if contact[i]:
+                if F[i] > f_th[i] + slack_f:
+                    contact[i] = False
+                    guess[i] = 0.0
+            elif x0[i] + u[i] > d + slack_u:
+                contact[i] = True
+        stats[S_SNAPPED] += n_over
+        stats[S_ENTERED] += n_into

@@ -1,0 +1,340 @@
+"""Rough surfaces: self-affine synthesis and measured height maps, on the spring grid.
+
+Self-affine roughness follows the conventions of SurfaceTopography's
+``fourier_synthesis`` (Jacobs, Junge & Pastewka, Surf. Topogr.: Metrol. Prop. 5,
+013001 (2017); Ramisetti et al., J. Phys.: Condens. Matter 23, 215004 (2011)), so the
+same statistics can be generated in either tool:
+
+- the isotropic PSD is C(q) = C0 q^(-2-2H), q = |q| = 2 pi / lambda;
+- it is zero above q_s = 2 pi / short_cutoff (a disc in q-space);
+- below q_L = 2 pi / long_cutoff it is constant, rolloff^2 C(q_L) (rolloff = 1: flat,
+  0: no wavelengths longer than long_cutoff); the q = 0 coefficient is zero;
+- C(q) = (1/A) |h~(q)|^2 with h~ = spacing^2 * numpy's unnormalized fft2 and
+  A = (n spacing)^2 the area of the periodic synthesis box;
+- random Fourier coefficients are complex normal (standard normal amplitude, uniform
+  phase), drawn from ``numpy.random.default_rng(roughness_seed)`` (PCG64).
+
+Normalization (where tfm differs from SurfaceTopography on purpose): SurfaceTopography
+scales C0 so that the *expected* rms of the ensemble is the request; tfm rescales each
+*realization* so that its own rms is the request to round-off. ``rms_height`` is the
+rms of the heights over the synthesis grid (their mean is zero). ``rms_slope`` is the
+*spectral* rms slope, sqrt(sum_q q^2 |h~(q)|^2 / A^2) -- the slope of the band-limited
+continuous surface, as in SurfaceTopography -- not a finite-difference slope, which is
+smaller (by about 5 % at short_cutoff = 4 spacings, less at longer cutoffs).
+
+What a seed guarantees: the same ``roughness_seed``, grid (spacing and number of
+springs a side, i.e. the grid half-width) and spectral parameters give the same
+surface bit for bit with the same NumPy version (NumPy does not promise PCG64 normal
+streams across versions). The synthesis box is the spring grid itself, so a run whose
+extent changes (``extent``, or ``max_indent``/``radius`` through the automatic extent)
+draws a different surface; to compare loads on one surface, fix ``extent``. Changing
+only ``rms_height`` or ``rms_slope`` rescales the same surface.
+
+The box is periodic; the contact problem is not (the elastic half-space is loaded only
+where springs touch), so periodicity matters only through the box size, which bounds
+the longest wavelength (``long_cutoff`` must not exceed the grid side).
+
+Height maps: a 2-D array of heights, pixel (i, j) at ((i - c_x) a, (j - c_y) a) with
+a = ``map_pixel_size`` and c = (n - 1) // 2 the centre pixel (axis 0 is x), so a map
+whose pixel equals the spacing lands exactly on the springs. Otherwise heights are
+interpolated bilinearly at the spring positions (no smoothing: a map finer than the
+spacing is sampled, not averaged; a coarser one gains no detail).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+#: default short-wavelength cutoff, in spacings (see ``default_short_cutoff``)
+SHORT_CUTOFF_SPACINGS = 4.0
+#: the shortest wavelength a grid carries (Nyquist), in spacings
+NYQUIST_SPACINGS = 2.0
+
+
+class MapError(ValueError):
+    """A height map cannot be read or is unusable (raised as ParameterError by Params)."""
+
+
+# ---- self-affine synthesis -------------------------------------------------
+def default_short_cutoff(spacing: float) -> float:
+    """4 spacings. Two spacings is the Nyquist wavelength: there the grid cannot tell a
+    wave from its phase and each summit is one spring. Four resolves the shortest
+    wavelength by four springs a period (a summit by about two), which keeps most of the
+    grid's bandwidth. For converged contact mechanics of the asperities use 8 or more
+    (bench/validate_contactmechanics.py: the force against a pixel BEM agrees to a few
+    per cent from 8 spacings on)."""
+    return SHORT_CUTOFF_SPACINGS * spacing
+
+
+def wavevectors(n: int, spacing: float) -> np.ndarray:
+    """|q| on the full n x n fft2 grid of a periodic box of side n * spacing."""
+    q = 2.0 * np.pi * np.fft.fftfreq(n, d=spacing)
+    return np.hypot(q[:, None], q[None, :])
+
+
+def self_affine_psd(q, hurst: float, short_cutoff: float, long_cutoff: float | None,
+                    rolloff: float = 1.0) -> np.ndarray:
+    """The unnormalized PSD shape q^(-2-2H) with SurfaceTopography's cutoffs (C0 = 1)."""
+    q = np.asarray(q, dtype=float)
+    exponent = -2.0 - 2.0 * hurst
+    q_s = 2.0 * np.pi / short_cutoff
+    psd = np.zeros_like(q)
+    inside = (q > 0) & (q <= q_s)
+    psd[inside] = q[inside] ** exponent
+    if long_cutoff is not None:
+        q_l = 2.0 * np.pi / long_cutoff
+        psd[inside & (q < q_l)] = rolloff ** 2 * q_l ** exponent
+    return psd
+
+
+def fourier_synthesis(n: int, spacing: float, hurst: float, *, rms_height: float = 0.0,
+                      rms_slope: float = 0.0, short_cutoff: float | None = None,
+                      long_cutoff: float | None = None, rolloff: float = 1.0,
+                      seed: int = 0) -> np.ndarray:
+    """A random self-affine surface on an n x n periodic grid (module docstring).
+
+    Give ``rms_height`` or ``rms_slope`` (> 0); the realization is rescaled so that its
+    rms height or spectral rms slope equals the request."""
+    if (rms_height > 0) == (rms_slope > 0):
+        raise ValueError("fourier_synthesis: give one of rms_height and rms_slope (> 0)")
+    short = default_short_cutoff(spacing) if short_cutoff is None else short_cutoff
+    q = wavevectors(n, spacing)
+    amplitude = np.sqrt(self_affine_psd(q, hurst, short, long_cutoff, rolloff))
+    rng = np.random.default_rng(seed)
+    noise = rng.standard_normal((n, n)) + 1j * rng.standard_normal((n, n))
+    # the real part of the inverse transform of a complex white spectrum is the
+    # Hermitian-symmetrized spectrum: every coefficient keeps the PSD shape
+    h = np.fft.ifft2(amplitude * noise).real
+    h -= h.mean()
+    H = np.fft.fft2(h)
+    power = np.abs(H) ** 2
+    if rms_height > 0:
+        realized = math.sqrt(float(power.sum())) / (n * n)
+        target = rms_height
+    else:
+        realized = math.sqrt(float((q ** 2 * power).sum())) / (n * n)
+        target = rms_slope
+    if realized == 0.0:
+        raise ValueError("fourier_synthesis: no wavevector of the grid lies between the cutoffs")
+    return h * (target / realized)
+
+
+def spectral_rms_slope(h: np.ndarray, spacing: float) -> float:
+    """sqrt(<|grad h|^2>) from the Fourier coefficients of a periodic square map."""
+    n = h.shape[0]
+    q = wavevectors(n, spacing)
+    H = np.fft.fft2(h - h.mean())
+    return math.sqrt(float((q ** 2 * np.abs(H) ** 2).sum())) / (n * n)
+
+
+def radial_psd(h: np.ndarray, spacing: float, nbins: int | None = None):
+    """Radially averaged PSD C(q) = spacing^2 |fft2(h)|^2 / n^2 of a square periodic map,
+    in SurfaceTopography's normalization; bins of equal width in q up to pi / spacing.
+    Returns (q, C) for the non-empty bins (bin centres: mean |q| of the members)."""
+    n = h.shape[0]
+    q = wavevectors(n, spacing).ravel()
+    C = (spacing ** 2 * np.abs(np.fft.fft2(h - h.mean())) ** 2 / (n * n)).ravel()
+    nbins = nbins or n // 2
+    edges = np.linspace(0.0, np.pi / spacing, nbins + 1)
+    which = np.digitize(q, edges) - 1
+    keep = (q > 0) & (which < nbins)
+    counts = np.bincount(which[keep], minlength=nbins)
+    qsum = np.bincount(which[keep], weights=q[keep], minlength=nbins)
+    csum = np.bincount(which[keep], weights=C[keep], minlength=nbins)
+    ok = counts > 0
+    return qsum[ok] / counts[ok], csum[ok] / counts[ok]
+
+
+def psd_exponent(h: np.ndarray, spacing: float, q_low: float, q_high: float, nbins: int = 20) -> float:
+    """Slope of log C against log q: least squares over ``nbins`` logarithmically spaced
+    radial bins between q_low and q_high (each bin's mean C at its mean |q|), so every
+    decade of q weighs the same."""
+    n = h.shape[0]
+    q = wavevectors(n, spacing).ravel()
+    C = (spacing ** 2 * np.abs(np.fft.fft2(h - h.mean())) ** 2 / (n * n)).ravel()
+    edges = np.geomspace(q_low, q_high, nbins + 1)
+    which = np.digitize(q, edges) - 1
+    keep = (which >= 0) & (which < nbins)
+    counts = np.bincount(which[keep], minlength=nbins)
+    ok = counts > 0
+    lq = np.bincount(which[keep], weights=q[keep], minlength=nbins)[ok] / counts[ok]
+    lc = np.bincount(which[keep], weights=C[keep], minlength=nbins)[ok] / counts[ok]
+    return float(np.polyfit(np.log(lq), np.log(lc), 1)[0])
+
+
+# ---- the run's roughness -----------------------------------------------------
+def is_rough(p) -> bool:
+    return p.rms_slope > 0 or p.rms_height > 0
+
+
+def grid_side(p) -> int:
+    """Springs a side of the square grid that covers the run's region."""
+    return 2 * int(math.ceil(p.half_width / p.spacing - 1e-9)) + 1
+
+
+def roughness(p, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The run's random heights at spring positions (x, y); zero when smooth.
+
+    Synthesized on the square grid of the run's spacing and half-width, and read at the
+    springs: exactly on the square layout, bilinearly on the jittered and hexagonal ones."""
+    if not is_rough(p):
+        return np.zeros(x.size)
+    n = grid_side(p)
+    h = fourier_synthesis(n, p.spacing, p.hurst, rms_height=p.rms_height, rms_slope=p.rms_slope,
+                          short_cutoff=p.short_cutoff, long_cutoff=p.long_cutoff,
+                          rolloff=p.rolloff, seed=p.roughness_seed)
+    # the synthesized surface is periodic: jittered springs beyond the box wrap around
+    return sample(h, p.spacing, x, y, periodic=True)
+
+
+def sample(h: np.ndarray, pixel: float, x: np.ndarray, y: np.ndarray, periodic: bool = False) -> np.ndarray:
+    """Bilinear interpolation of map h (centre pixel at the origin) at points (x, y).
+
+    Points on pixel centres get the pixel's value exactly; points outside the map are
+    an error unless the map is ``periodic`` (the validation keeps the grid inside a
+    measured map)."""
+    nx, ny = h.shape
+    cx, cy = (nx - 1) // 2, (ny - 1) // 2
+    fx = np.asarray(x, dtype=float) / pixel + cx
+    fy = np.asarray(y, dtype=float) / pixel + cy
+    # snap round-off (x = k * spacing computed in floating point) onto the pixel
+    fx = np.where(np.abs(fx - np.rint(fx)) < 1e-9, np.rint(fx), fx)
+    fy = np.where(np.abs(fy - np.rint(fy)) < 1e-9, np.rint(fy), fy)
+    if periodic:
+        i0, j0 = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
+        tx, ty = fx - i0, fy - j0
+        i0, j0 = i0 % nx, j0 % ny
+        i1, j1 = (i0 + 1) % nx, (j0 + 1) % ny
+    else:
+        if fx.size and (fx.min() < 0 or fy.min() < 0 or fx.max() > nx - 1 or fy.max() > ny - 1):
+            raise MapError("height map: a spring lies outside the map")
+        i0 = np.clip(np.floor(fx).astype(np.int64), 0, max(nx - 2, 0))
+        j0 = np.clip(np.floor(fy).astype(np.int64), 0, max(ny - 2, 0))
+        tx, ty = fx - i0, fy - j0
+        i1, j1 = np.minimum(i0 + 1, nx - 1), np.minimum(j0 + 1, ny - 1)
+    return ((1 - tx) * (1 - ty) * h[i0, j0] + tx * (1 - ty) * h[i1, j0]
+            + (1 - tx) * ty * h[i0, j1] + tx * ty * h[i1, j1])
+
+
+# ---- height maps -------------------------------------------------------------
+_MAP_CACHE: dict[tuple, "HeightMap"] = {}
+
+
+class HeightMap:
+    """Heights (float64, 2-D), the file's own pixel size if it has one, the content hash."""
+
+    def __init__(self, heights: np.ndarray, pixel_size: float | None, unit: str | None):
+        self.heights = heights
+        self.pixel_size = pixel_size
+        self.unit = unit
+        digest = hashlib.sha256()
+        digest.update(repr(heights.shape).encode())
+        digest.update(np.ascontiguousarray(heights, dtype="<f8").tobytes())
+        if pixel_size is not None:
+            digest.update(repr(float(pixel_size)).encode())
+        self.sha256 = digest.hexdigest()
+
+
+def load_height_map(path: str) -> HeightMap:
+    """Read and check a height map: ``.npy`` with NumPy; any other format through
+    SurfaceTopography (``pip install tfm[topography]``), which supplies the pixel size
+    and the unit. Raises MapError for a missing, non-2-D or non-finite map."""
+    file = Path(os.path.expanduser(str(path)))
+    try:
+        stat = file.stat()
+    except OSError:
+        raise MapError(f"height_map: no such file {str(path)!r}") from None
+    key = (str(file.resolve()), stat.st_mtime_ns, stat.st_size)
+    if key in _MAP_CACHE:
+        return _MAP_CACHE[key]
+    pixel = unit = None
+    if file.suffix.lower() == ".npy":
+        try:
+            heights = np.load(file, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise MapError(f"height_map: cannot read {str(path)!r} as a .npy array: {exc}") from None
+    else:
+        heights, pixel, unit = _read_with_surface_topography(file)
+    heights = np.asarray(heights)
+    if heights.ndim != 2:
+        raise MapError(f"height_map: must be a 2-D array of heights, got shape {heights.shape}")
+    if not np.issubdtype(heights.dtype, np.number) or np.iscomplexobj(heights):
+        raise MapError(f"height_map: heights must be real numbers, got dtype {heights.dtype}")
+    heights = heights.astype(np.float64)
+    bad = ~np.isfinite(heights)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise MapError(f"height_map: {int(bad.sum())} heights are NaN or infinite "
+                       f"(first at pixel [{i}, {j}]); fill or crop the missing data first")
+    if min(heights.shape) < 2:
+        raise MapError(f"height_map: needs at least 2 x 2 pixels, got {heights.shape}")
+    hm = HeightMap(heights, pixel, unit)
+    _MAP_CACHE[key] = hm
+    return hm
+
+
+def _read_with_surface_topography(file: Path):
+    try:
+        from SurfaceTopography import read_topography
+    except ImportError:
+        raise MapError(f"height_map: {file.suffix!r} files need SurfaceTopography "
+                       "(pip install 'tfm[topography]'); or save the heights as .npy") from None
+    try:
+        topo = read_topography(str(file))
+    except Exception as exc:  # noqa: BLE001 - any reader failure is a bad map
+        raise MapError(f"height_map: SurfaceTopography cannot read {str(file)!r}: {exc}") from None
+    if topo.dim != 2:
+        raise MapError(f"height_map: {str(file)!r} is a line scan, not a 2-D map")
+    sx, sy = topo.physical_sizes
+    nx, ny = topo.nb_grid_pts
+    if not math.isclose(sx / nx, sy / ny, rel_tol=1e-9):
+        raise MapError(f"height_map: pixels must be square, got {sx / nx:g} x {sy / ny:g}")
+    return np.asarray(topo.heights()), sx / nx, getattr(topo, "unit", None)
+
+
+def map_pixel(p, hm: HeightMap) -> float:
+    """The map's pixel size in the run's length unit: map_pixel_size, else the file's
+    own, else the spacing."""
+    if p.map_pixel_size is not None:
+        return float(p.map_pixel_size)
+    if hm.pixel_size is not None:
+        return float(hm.pixel_size) * unit_to_metres(hm.unit, p)
+    return float(p.spacing)
+
+
+def heights_in_run_units(p, hm: HeightMap) -> np.ndarray:
+    return hm.heights * unit_to_metres(hm.unit, p) if hm.pixel_size is not None else hm.heights
+
+
+_SI_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "nm": 1e-9, "pm": 1e-12, "A": 1e-10}
+
+
+def unit_to_metres(unit: str | None, p) -> float:
+    """Factor from a file's length unit to metres (a file without a unit: 1). A map read
+    by SurfaceTopography is in metres in either unit system (in paper units, L* = 1 m),
+    so an SI run and its paper-units twin see the same heights."""
+    if unit is None:
+        return 1.0
+    if unit not in _SI_UNITS:
+        raise MapError(f"height_map: unknown length unit {unit!r} in the file; "
+                       f"known: {', '.join(_SI_UNITS)}")
+    return _SI_UNITS[unit]
+
+
+def map_half_width(p, hm: HeightMap) -> float:
+    """Half-width of the largest centred square of springs the map covers."""
+    a = map_pixel(p, hm)
+    nx, ny = hm.heights.shape
+    cx, cy = (nx - 1) // 2, (ny - 1) // 2
+    avail = min(cx, nx - 1 - cx, cy, ny - 1 - cy) * a
+    return math.floor(avail / p.spacing + 1e-9) * p.spacing
+
+
+def map_heights(p, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The run's height map at the spring positions."""
+    hm = load_height_map(p.height_map)
+    return sample(heights_in_run_units(p, hm), map_pixel(p, hm), x, y)

@@ -1,0 +1,133 @@
+"""Physical units: SI <-> the paper's nondimensional units, and K_th from the work of adhesion.
+
+The paper (Hulikal, Bhattacharya & Lapusta, Sec. 2 and its last equation) measures
+lengths in L* and forces in F* = 2 pi G L*^2 / (1 - nu) = pi E* L*^2, with
+E* = E / (1 - nu^2) = 2 G / (1 - nu); then C_ij = 1/r_ij. Its fit
+F_max = c K_th^2 R (c = 7.6) with the JKR pull-off F_max = (3/2) pi gamma R gives
+
+    K_th = pi sqrt(3 G gamma / (c (1 - nu)))            (SI: Pa m^(1/2))
+
+for the threshold F_th = K_th A^(3/4) (alpha = 0.75, the LEFM scaling; other alphas make
+the relation depend on the spacing, so an SI run with ``work_of_adhesion`` needs
+alpha = 0.75). ``k_th_coefficient`` is c: a number, or a name from
+``K_TH_COEFFICIENTS`` ("paper" = 7.6, the paper's fit at spacing 1/256; "jkr" =
+3 pi^2/4, the continuum JKR/LEFM value). With c equal to the coefficient the model
+actually shows at the run's resolution, the pull-off equals (3/2) pi gamma R.
+
+An SI run is solved as a paper-units run with L* = 1 m: lengths keep their numbers (in
+metres), forces are divided by F* = pi E* (1 m)^2, and K_th becomes
+K_th (1 - nu) / (2 pi G) (per m^(1/2)). The model is scale-free, so the choice of L*
+changes no result; 1 m keeps every length's number as the user wrote it.
+"""
+from __future__ import annotations
+
+import math
+
+from .theory import JKR_COEFFICIENT, PAPER_COEFFICIENT
+
+#: named values of k_th_coefficient (c in F_max = c K_th^2 R). Add a name here to make
+#: it selectable (e.g. a measured continuum limit).
+K_TH_COEFFICIENTS: dict[str, float] = {
+    "paper": PAPER_COEFFICIENT,
+    "jkr": JKR_COEFFICIENT,
+}
+
+#: L* of an SI run, in metres
+LENGTH_SCALE_SI = 1.0
+
+#: units of the curve and summary columns, per unit system
+COLUMN_UNITS = {
+    "paper": {"length": "L* (paper units)", "force": "F* = 2 pi G L*^2/(1 - nu)", "area": "L*^2",
+              "columns": {"d": "length", "indent": "length", "force": "force",
+                          "contact_area": "area", "contact_radius": "length",
+                          "pull_off_force": "force", "pull_off_indent": "length",
+                          "pull_off_contact_radius": "length", "max_indent": "length",
+                          "f_th": "force", "max_force": "force", "max_contact_radius": "length",
+                          "first_snap_indent": "length", "half_width": "length"}},
+    "si": {"length": "m", "force": "N", "area": "m^2"},
+}
+COLUMN_UNITS["si"]["columns"] = COLUMN_UNITS["paper"]["columns"]
+
+
+def resolve_coefficient(value) -> float:
+    """c from a number or a name of ``K_TH_COEFFICIENTS``."""
+    if isinstance(value, str):
+        try:
+            return K_TH_COEFFICIENTS[value]
+        except KeyError:
+            raise ValueError(f"k_th_coefficient: unknown name {value!r}; "
+                             f"known: {', '.join(K_TH_COEFFICIENTS)}, or a number") from None
+    return float(value)
+
+
+def shear_modulus(youngs_modulus: float, poisson_ratio: float) -> float:
+    return youngs_modulus / (2.0 * (1.0 + poisson_ratio))
+
+
+def plane_strain_modulus(youngs_modulus: float, poisson_ratio: float) -> float:
+    """E* = E / (1 - nu^2) of an elastic body pressed by a rigid one."""
+    return youngs_modulus / (1.0 - poisson_ratio ** 2)
+
+
+def force_scale(p) -> float:
+    """F* = 2 pi G L*^2 / (1 - nu) in newtons for an SI run (1 for paper units)."""
+    if p.units != "si":
+        return 1.0
+    G = shear_modulus(p.youngs_modulus, p.poisson_ratio)
+    return 2.0 * math.pi * G * LENGTH_SCALE_SI ** 2 / (1.0 - p.poisson_ratio)
+
+
+def k_th_from_work_of_adhesion(work_of_adhesion: float, youngs_modulus: float,
+                               poisson_ratio: float, coefficient=PAPER_COEFFICIENT) -> float:
+    """The paper's last equation: K_th = pi sqrt(3 G gamma / (c (1 - nu))), in Pa m^(1/2)."""
+    c = resolve_coefficient(coefficient)
+    G = shear_modulus(youngs_modulus, poisson_ratio)
+    return math.pi * math.sqrt(3.0 * G * work_of_adhesion / (c * (1.0 - poisson_ratio)))
+
+
+def k_th_si(p) -> float:
+    """K_th of an SI run (Pa m^(1/2))."""
+    return k_th_from_work_of_adhesion(p.work_of_adhesion, p.youngs_modulus, p.poisson_ratio,
+                                      p.k_th_coefficient)
+
+
+def jkr_pull_off_si(work_of_adhesion: float, radius: float) -> float:
+    """(3/2) pi gamma R, in newtons."""
+    return 1.5 * math.pi * work_of_adhesion * radius
+
+
+def to_paper(p):
+    """The same run in the paper's units (L* = 1 m): an SI record's twin that the solver
+    runs. A paper-units record is returned as it is."""
+    if p.units != "si":
+        return p
+    F = force_scale(p)
+    changes = dict(units="paper", youngs_modulus=None, poisson_ratio=None, work_of_adhesion=None,
+                   k_th_coefficient="paper")
+    if p.work_of_adhesion is not None:
+        # F_th = K A^0.75 in N  ->  F_th / F* = (K L*^1.5 / F*) (A / L*^2)^0.75
+        changes.update(k_th=k_th_si(p) * LENGTH_SCALE_SI ** 1.5 / F, f_th=None)
+    else:
+        changes.update(f_th=p.f_th / F, k_th=None)
+    import dataclasses
+    return dataclasses.replace(p, **changes)
+
+
+def to_si_curve(curve, p):
+    """Scale a paper-units curve (L* = 1 m) of the twin of SI record ``p`` to SI."""
+    out = curve.copy()
+    out["force"] = out["force"] * force_scale(p)
+    return out
+
+
+def to_si_summary(summary: dict, p) -> dict:
+    out = dict(summary)
+    F = force_scale(p)
+    for key in ("pull_off_force", "max_force", "f_th"):
+        out[key] = out[key] * F
+    return out
+
+
+def unit_labels(p) -> dict:
+    """What the run's curve and summary are measured in (for the tables' metadata)."""
+    return {"system": p.units, **COLUMN_UNITS[p.units]}
