@@ -2,7 +2,7 @@
 
     python examples/campaign_tables.py [OUTPUT_DIR]
 
-The campaign (6 runs at spacing 1/16, a few seconds) sweeps alpha and the radius of a
+The campaign (6 runs at spacing 1/32, a few seconds) sweeps alpha and the radius of a
 paraboloid; its tables land in OUTPUT_DIR/example_smoke/ (default: a temporary folder).
 Column meanings, units and signs: docs/tables.md.
 """
@@ -18,7 +18,7 @@ from tfm.campaign import run_campaign, spec_from_dict
 SPEC = {
     "name": "example_smoke",
     "description": "coarse paraboloid pull-off: 2 alphas x 3 radii (max_indent follows radius)",
-    "base": {"spacing": "1/16", "shape": "paraboloid", "k_th": 0.02, "step": 2e-3, "snapshots": "events"},
+    "base": {"spacing": "1/32", "shape": "paraboloid", "k_th": 0.02, "step": 2e-3, "snapshots": "events"},
     "sweep": {"alpha": [0.5, 0.75]},
     "zip": [{"radius": [0.5, 1.0, 2.0], "max_indent": [0.025, 0.05, 0.1]}],
 }
