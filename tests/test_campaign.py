@@ -146,7 +146,7 @@ def test_tables_have_expected_columns_and_rows(serial_run):
                 "prov_tfm_version", "prov_git_commit", "prov_numba_version", "prov_numpy_version",
                 "prov_host", "prov_started_at", "prov_numba_threads"):
         assert col in summary.columns, col
-    assert all(c in ("run_id", "status") or c.split("_", 1)[0] in ("p", "r", "prov") for c in summary.columns)
+    assert all(c in ("run_id", "status", "fields_path") or c.split("_", 1)[0] in ("p", "r", "prov") for c in summary.columns)
     assert summary["p_max_indent"].tolist() == ["0.05", "0.1", "0.2"] * 2
     assert summary["r_max_indent"].tolist() == [0.05, 0.1, 0.2] * 2
     assert (summary["r_pull_off_force"] > 0).all()

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from . import __version__
 from .params import ParameterError, Params
+from .viewcli import register as register_views
 
 
 PARAM_HELP = {
@@ -38,6 +39,10 @@ PARAM_HELP = {
     "preconditioner": "auto | fft | stencil | diagonal | none",
     "extent": "grid half-width (default: from the Hertz radius at max_indent)",
     "extent_margin": "auto extent = margin * contact radius + 4 spacings",
+    "control": "displacement (the paper) | force: load to max_load, lower the load until jump-off",
+    "max_load": "control=force: peak compressive load (default: the Hertz load at max_indent)",
+    "load_step": "control=force: load increment and decrement (default max_load / 100)",
+    "snapshots": "field snapshots beside the table: none | events | K (every K-th step + events)",
     "hurst": "roughness: Hurst exponent H in (0, 1), PSD ~ q^(-2-2H)",
     "rms_slope": "roughness: spectral rms slope (0 = smooth)",
     "rms_height": "roughness: rms height (give it or rms_slope)",
@@ -130,6 +135,9 @@ def check_output(path: Path, what: str, suffixes: tuple[str, ...], overwrite: bo
 def _plan_outputs(args, p: Params) -> tuple[Path, Path | None]:
     out = Path(args.output) if args.output else default_output(p)
     check_output(out, "output", (TABLE_SUFFIX,), args.overwrite, create=not args.output)
+    if p.snapshots != "none":             # the field snapshots stream beside the table
+        from .results import fields_path_for
+        check_output(fields_path_for(out), "snapshots", (".nc",), args.overwrite, create=False)
     if args.no_plot:
         return out, None
     plot = Path(args.plot) if args.plot else out.with_suffix(".png")
@@ -143,6 +151,7 @@ def cmd_run(args) -> int:
     import warnings
 
     from .guards import check, estimate_memory
+    from .protocol import n_loading_steps
 
     p = _params_from_args(args)
     notes = check(p)                      # refuses meaningless or oversized runs (exit 2)
@@ -150,16 +159,18 @@ def cmd_run(args) -> int:
     if not args.quiet:
         print(f"tfm run {p.run_id}: spacing={p.spacing:.6g} F_th={p.threshold_force:.4g} "
               f"R={p.radius:g} shape={p.shape} kernel={p.kernel} operator={p.operator} "
-              f"max_indent={p.delta_max:.4g} ({p.delta_max / p.step:.0f} loading steps), "
+              f"max_indent={p.delta_max:.4g} ({n_loading_steps(p)} loading steps), "
               f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
     for note in notes:                    # stated before the run starts
         print(f"tfm: warning: {note}", file=sys.stderr)
 
+    from .progress import run_progress
     from .simulate import RunWarning, simulate
 
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), run_progress(p, quiet=args.quiet) as progress:
         warnings.simplefilter("ignore", RunWarning)
-        res = simulate(p)
+        from .results import fields_path_for
+        res = simulate(p, progress=progress, fields_path=fields_path_for(out) if p.snapshots != "none" else None)
     res.write_curve(out)
     if plot_path is not None:
         from .plots import plot_curve
@@ -172,11 +183,13 @@ def cmd_run(args) -> int:
             tmp.unlink(missing_ok=True)
     s = res.summary
     if not args.quiet:
+        jump = ("jump_off_force", "jump_off_contact_radius") if p.control == "force" else ()
         print(json.dumps({k: s[k] for k in ("pull_off_force", "pull_off_indent", "max_indent",
-                                            "max_contact_radius", "n_steps", "n_solves",
+                                            "max_contact_radius", *jump, "n_steps", "n_solves",
                                             "solver_iters", "wall_time", "force_unit", "length_unit")},
                          indent=1))
-        print(f"wrote {out}" + ("" if plot_path is None else f" and {plot_path}"), file=sys.stderr)
+        print(f"wrote {out}" + ("" if plot_path is None else f" and {plot_path}")
+              + (f" and {res.fields_path}" if res.fields_path else ""), file=sys.stderr)
     if s["warnings"]:
         print(f"WARNING: {s['warnings']}", file=sys.stderr)
         return 3
@@ -204,6 +217,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.set_defaults(func=cmd_run)
     from .campaign.cli import register
     register(sub)
+    register_views(sub)
     from .paper.cli import register as register_paper   # tfm paper, tfm limit
     register_paper(sub)
     return parser

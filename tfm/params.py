@@ -36,6 +36,8 @@ OPERATORS = ("fft", "direct", "tree")
 LAYOUTS = ("square", "hexagonal", "jittered")
 SNAP_RULES = ("batch", "single")
 PRECONDITIONERS = ("auto", "fft", "stencil", "diagonal", "none")
+CONTROLS = ("displacement", "force")
+SNAPSHOT_MODES = ("none", "events")
 DISORDERS = ("none", "uniform", "weibull")
 UNITS = ("paper", "si")
 
@@ -141,6 +143,11 @@ class Params:
     poisson_ratio: float | None = None    # nu in (-1, 0.5], units="si"
     work_of_adhesion: float | None = None  # gamma (J/m^2), units="si"
     k_th_coefficient: float | str = "paper"  # c in F_max = c K_th^2 R: a number or a name
+    # loading protocol (tfm.protocol) and field output (tfm.snapshots)
+    control: str = "displacement"       # "displacement" (the paper's runs) or "force"
+    max_load: float | None = None       # control="force": peak compressive load; None = Hertz load at max_indent
+    load_step: float | None = None      # control="force": load decrement; None = max_load / 100
+    snapshots: int | str = "none"       # "none", "events", or every k-th step (plus the events)
 
     # meaningful-run guards to override (tfm.guards.GUARDS), comma-separated; not hashed
     allow: str = ""
@@ -149,7 +156,9 @@ class Params:
         if self.threshold_disorder is None:       # "none" in TOML and on the CLI reads as None
             object.__setattr__(self, "threshold_disorder", "none")
         _normalize(self)
+        _validate_protocol(self)       # before _validate: delta_max may depend on max_load
         _validate(self)
+        _validate_protocol_relations(self)
 
     # ---- derived quantities -------------------------------------------------
     @property
@@ -158,9 +167,27 @@ class Params:
         from .threshold import mean_threshold
         return mean_threshold(self)
 
+    @property
+    def peak_load(self) -> float:
+        """control="force": the peak compressive load, resolving ``max_load=None`` to the
+        Hertz load at ``delta_max``."""
+        if self.max_load is not None:
+            return float(self.max_load)
+        from .theory import hertz_force
+        return float(hertz_force(self.delta_max, self.radius))
+
+    @property
+    def load_decrement(self) -> float:
+        """control="force": the load step, resolving ``load_step=None``."""
+        return float(self.load_step) if self.load_step is not None else self.peak_load / 100.0
+
     @functools.cached_property           # a pure function of a frozen record
     def delta_max(self) -> float:
-        """The preload depth, resolving ``max_indent="auto"``."""
+        """The preload depth, resolving ``max_indent="auto"`` (under force control with an
+        explicit max_load: the Hertz depth of that load, which sizes the grid)."""
+        if self.max_indent == "auto" and getattr(self, "max_load", None) is not None:
+            from .theory import hertz_indent
+            return float(hertz_indent(self.max_load, self.radius))
         if self.max_indent == "auto":
             if self.units == "si":          # same lengths in paper units with L* = 1 m
                 from .units import to_paper
@@ -339,6 +366,9 @@ APPLIES: dict[str, Applies] = {
     "theta": Applies("operator='tree'", lambda p: p.operator == "tree"),
     "jitter": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
     "seed": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
+    "extent_margin": Applies("extent is automatic (extent = none)", lambda p: p.extent is None),
+    "max_load": Applies("control='force'", lambda p: p.control == "force"),
+    "load_step": Applies("control='force'", lambda p: p.control == "force"),
     "extent_margin": Applies("extent is automatic (extent = none) and shape is not 'height_map'",
                              lambda p: p.extent is None and p.shape != "height_map"),
     # roughness, height maps, threshold disorder, units (tfm.surfaces, tfm.threshold, tfm.units)
@@ -366,6 +396,8 @@ def _check_applies(p: Params) -> None:
 
 
 def _coerce(key: str, value: Any, prefix: str) -> Any:
+    if key == "snapshots":
+        return _coerce_snapshots(value, prefix)
     try:
         if value is None:
             return None
@@ -497,6 +529,50 @@ def _validate(p: Params) -> None:
         raise ParameterError(f"preconditioner: {p.preconditioner!r} needs layout='square'; use 'auto' or 'none'")
     _validate_surface_relations(p)
     _check_applies(p)
+
+
+def _coerce_snapshots(value: Any, prefix: str) -> Any:
+    """``snapshots``: "none" (also None), "events", or a whole number k given as int or text."""
+    if value is None:
+        return "none"
+    if isinstance(value, str) and value.strip().lower() in SNAPSHOT_MODES:
+        return value.strip().lower()
+    if isinstance(value, str):
+        try:
+            number = parse_number(value, "snapshots")
+        except ParameterError:
+            raise ParameterError(f"{prefix}snapshots: expected 'none', 'events' or a whole number k "
+                                 f"(every k-th step), got {value!r}") from None
+        return int(number) if number.is_integer() else number
+    return value
+
+
+def _validate_protocol(p: Params) -> None:
+    """The loading protocol and the field output (tfm.protocol, tfm.snapshots)."""
+    _choice("control", p.control, CONTROLS)
+    snaps = p.snapshots
+    if isinstance(snaps, str):
+        _choice("snapshots", snaps, SNAPSHOT_MODES)
+    else:
+        _integer("snapshots", snaps, 1)
+    if p.control == "displacement":
+        return                          # max_load and load_step: see APPLIES
+    if p.max_load is not None:
+        _positive("max_load", p.max_load)
+        if p.max_indent != "auto":
+            raise ParameterError("max_indent: under control='force' with an explicit max_load the preload "
+                                 "is a load; leave max_indent 'auto' (it then follows max_load)")
+    elif p.shape == "flat_punch":
+        raise ParameterError("max_load: control='force' on a flat punch needs an explicit max_load "
+                             "(there is no Hertz load to derive it from)")
+    if p.load_step is not None:
+        _positive("load_step", p.load_step)
+
+
+def _validate_protocol_relations(p: Params) -> None:
+    if p.control == "force" and p.load_step is not None:
+        if p.load_step > p.peak_load:
+            raise ParameterError(f"load_step: must be <= max_load ({p.peak_load:g}), got {p.load_step!r}")
 
 
 # ---- roughness, height maps, threshold disorder (tfm.surfaces, tfm.threshold) ----

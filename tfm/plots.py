@@ -1,105 +1,435 @@
-"""Figures in the style of the paper: force against indentation, contact radius against force."""
+"""Figures in the style of the paper: force against indentation, contact radius against
+force, the paper's figures (tfm.paper), and contact maps of field snapshots.
+
+Every figure is 7 in wide (a two-column journal figure; each panel then prints at about
+a column's width) with 8-pt text, panels lettered (a), (b), ...; PNGs at 200 dpi. The
+figures are built on ``matplotlib.figure.Figure`` with the Agg canvas, without pyplot:
+importing this module stays cheap and no global figure state is kept.
+"""
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib import rc_context
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator, ScalarFormatter
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from . import theory  # noqa: E402
+from . import theory
 
 PHASE_COLOURS = {"load": "tab:blue", "unload": "tab:red"}
-
-
-def plot_curve(curve, params=None, path=None, title=None, hertz=True):
-    """Two panels: (a) force vs indentation, (b) contact radius vs force; load in blue,
-    unload in red, with the Hertz curve overlaid for reference."""
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
-    for phase, colour in PHASE_COLOURS.items():
-        part = curve[curve["phase"] == phase]
-        ax1.plot(part["indent"], part["force"], ".-", ms=2, lw=0.8, color=colour, label=phase)
-        ax2.plot(part["force"], part["contact_radius"], ".-", ms=2, lw=0.8, color=colour, label=phase)
-    if hertz and params is not None and params.shape in ("sphere", "paraboloid") and params.kernel == "boussinesq":
-        delta = np.linspace(0, params.delta_max, 200)
-        P = theory.hertz_force(delta, params.radius)
-        ax1.plot(delta, P, "k--", lw=0.8, label="Hertz (paraboloid)")
-        ax2.plot(P, theory.hertz_radius(delta, params.radius), "k--", lw=0.8, label="Hertz (paraboloid)")
-    ax1.set_xlabel("indentation $\\delta = -d$")
-    ax1.set_ylabel("force $P$ (compression > 0)")
-    ax2.set_xlabel("force $P$ (compression > 0)")
-    ax2.set_ylabel("contact radius $a$")
-    for ax in (ax1, ax2):
-        ax.axhline(0, color="0.7", lw=0.5)
-        ax.legend(frameon=False, fontsize=8)
-    if title is None and params is not None:
-        title = (f"spacing={params.spacing:.4g}, F_th={params.threshold_force:.3g}, "
-                 f"alpha={params.alpha:g}, R={params.radius:g}, {params.shape}, {params.kernel}")
-    if title:
-        fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
-    return fig
-
-
-# ---- the paper's figures (tfm.paper) -------------------------------------------
 SPACING_COLOURS = ("tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink")
+WIDTH = 7.0                      # inches: a two-column figure
+DPI = 200
+STYLE = {"font.size": 8, "axes.labelsize": 8, "axes.titlesize": 8, "legend.fontsize": 7,
+         "xtick.labelsize": 7, "ytick.labelsize": 7, "lines.linewidth": 1.0, "legend.frameon": False,
+         "axes.formatter.use_mathtext": True}
+FORCE_LABEL = "force $P$ (compression > 0)"
+INDENT_LABEL = "indentation $\\delta = -d$"
 
 
-def _save(fig, path):
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-    return fig
+# ---- shared helpers -----------------------------------------------------------
+def figure(ncols=1, nrows=1, height=2.8, width=WIDTH):
+    fig = Figure(figsize=(width, height), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    return fig, list(axes)
+
+
+def letter(axes, start=0):
+    """Panel letters (a), (b), ... at the top left of each panel."""
+    for i, ax in enumerate(axes):
+        ax.text(-0.02, 1.02, f"({chr(ord('a') + start + i)})", transform=ax.transAxes, ha="right",
+                va="bottom", fontweight="bold", fontsize=9)
+
+
+def tidy_ticks(*axes, nbins=5):
+    """At most ``nbins`` ticks per axis and a common power of ten as offset: no overlaps."""
+    for ax in axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            if axis.get_scale() != "linear":
+                continue
+            axis.set_major_locator(MaxNLocator(nbins=nbins))
+            fmt = ScalarFormatter(useMathText=True)
+            fmt.set_powerlimits((-2, 3))
+            axis.set_major_formatter(fmt)
+
+
+def fraction_ticks(ax, spacings):
+    """Spacing ticks of a log axis as 1/64, 1/128 (and no minor ticks on that axis)."""
+    from matplotlib.ticker import NullLocator
+
+    ax.set_xticks(spacings, [spacing_text(s) for s in spacings])
+    ax.xaxis.set_minor_locator(NullLocator())
+
+
+def fold_x_offsets(fig):
+    """Move a linear x axis' common factor (×10⁻²) from below the right end of the axis,
+    where a long label runs into it, into the label itself."""
+    for ax in fig.axes:
+        axis = ax.xaxis
+        fmt = axis.get_major_formatter()
+        if axis.get_scale() != "linear" or not isinstance(fmt, ScalarFormatter) or not ax.get_xlabel():
+            continue
+        lo, hi = ax.get_xlim()
+        fmt.set_locs([t for t in axis.get_majorticklocs() if min(lo, hi) <= t <= max(lo, hi)])
+        offset = fmt.get_offset()
+        if offset and "(" + offset not in ax.get_xlabel():
+            ax.set_xlabel(f"{ax.get_xlabel()} ({offset})")
+            axis.get_offset_text().set_visible(False)
+
+
+def number(x, digits=3) -> str:
+    """A number for a caption: 2×10⁻⁵ rather than 2e-05, 0.135 rather than 0.13500."""
+    if x == 0 or not math.isfinite(x):
+        return f"{x:g}"
+    exp = math.floor(math.log10(abs(x)))
+    if -3 <= exp < 4:
+        return f"{x:.{digits}g}"
+    mant = x / 10 ** exp
+    mtxt = f"{mant:.{digits}g}"
+    return f"$10^{{{exp}}}$" if mtxt == "1" else f"${mtxt}\\times10^{{{exp}}}$"
+
+
+def spacing_text(spacing) -> str:
+    """1/128 rather than 0.007812."""
+    inv = 1.0 / spacing
+    return f"1/{inv:.0f}" if abs(inv - round(inv)) < 1e-6 * inv else number(spacing)
 
 
 def _spacing_label(spacing):
-    inv = 1.0 / spacing
-    return f"$\\Delta$ = 1/{inv:.0f}" if abs(inv - round(inv)) < 1e-6 else f"$\\Delta$ = {spacing:.3g}"
+    return f"$\\Delta$ = {spacing_text(spacing)}"
 
 
+def run_caption(p) -> str:
+    """The parameters that matter for a run, caption style (alpha only where it acts)."""
+    shape = {"sphere": "sphere", "paraboloid": "paraboloid", "flat_punch": "flat punch"}[p.shape]
+    if p.f_th is not None:
+        thr = f"$F_{{th}}$ = {number(p.f_th)}"
+    else:
+        thr = f"$F_{{th}} = K_{{th}}A^{{\\alpha}}$, $K_{{th}}$ = {number(p.k_th)}, $\\alpha$ = {p.alpha:g}"
+    parts = [f"{shape} $R$ = {p.radius:g}", f"$\\Delta$ = {spacing_text(p.spacing)}", thr]
+    if p.control == "force":
+        parts.append(f"force control to $P_{{max}}$ = {number(p.peak_load)}")
+    else:
+        parts.append(f"$\\delta_{{max}}$ = {number(p.delta_max)}, step {number(p.step)}")
+    if p.kernel != "boussinesq":
+        parts.append(f"{p.kernel} kernel")
+    if p.layout != "square":
+        parts.append(f"{p.layout} layout")
+    if p.operator != "fft":
+        parts.append(f"{p.operator} operator" + (f" ($\\theta$ = {p.theta:g})" if p.operator == "tree" else ""))
+    return ", ".join(parts)
+
+
+def reference_label(p) -> str | None:
+    """The analytical reference drawn for a run, named for what it is."""
+    if p is None or p.kernel != "boussinesq":
+        return None
+    if p.shape == "paraboloid":
+        return "Hertz"
+    if p.shape == "sphere":
+        return "Hertz (paraboloid approximation of the sphere)"
+    return "Boussinesq flat punch, $P = 2E^*R\\delta$"
+
+
+def _save(fig, path):
+    fold_x_offsets(fig)
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=DPI)
+    return fig
+
+
+def styled(func):
+    """Draw with the module's style without changing the caller's rcParams."""
+    def wrapper(*args, **kwargs):
+        with rc_context(STYLE):
+            return func(*args, **kwargs)
+    wrapper.__name__, wrapper.__doc__ = func.__name__, func.__doc__
+    return wrapper
+
+
+def split_snap_off(part):
+    """The rows in contact, and the final row after the last snap (None if there is none):
+    a jump, to be drawn as one, not as a line through intermediate states."""
+    if len(part) and int(part["n_contact"].iloc[-1]) == 0 and len(part) > 1:
+        return part.iloc[:-1], part.iloc[-2:]
+    return part, None
+
+
+def draw_jump(ax, x, y, colour, label=None):
+    """A jump from (x[0], y[0]) to (x[1], y[1]): dotted arrow, open circle at the end."""
+    ax.annotate("", xy=(x[1], y[1]), xytext=(x[0], y[0]),
+                arrowprops=dict(arrowstyle="->", color=colour, ls=":", lw=1.0, shrinkA=0, shrinkB=2))
+    ax.plot([x[1]], [y[1]], "o", mfc="white", mec=colour, ms=3.5, label=label)
+
+
+def draw_branches(ax1, ax2, curve, colours=PHASE_COLOURS, lw=1.0, labels=True):
+    """Loading and unloading branches on (a) P(delta) and (b) a(P); the final snap-off as a jump."""
+    for phase, colour in colours.items():
+        part = curve[curve["phase"] == phase]
+        if not len(part):
+            continue
+        body, jump = split_snap_off(part) if phase == "unload" else (part, None)
+        lab = phase if labels else None
+        ax1.plot(body["indent"], body["force"], "-", lw=lw, color=colour, label=lab)
+        ax2.plot(body["force"], body["contact_radius"], "-", lw=lw, color=colour, label=lab)
+        if jump is not None:
+            jl = "snap-off (jump)" if labels else None
+            draw_jump(ax1, jump["indent"].to_numpy(), jump["force"].to_numpy(), colour, jl)
+            draw_jump(ax2, jump["force"].to_numpy(), jump["contact_radius"].to_numpy(), colour, None)
+
+
+def draw_reference(ax1, ax2, p, dmax):
+    label = reference_label(p)
+    if label is None:
+        return
+    delta = np.linspace(0, dmax, 200)
+    if p.shape == "flat_punch":
+        P = theory.flat_punch_force(delta, p.radius)
+        a = np.full_like(delta, p.radius)
+    else:
+        P = theory.hertz_force(delta, p.radius)
+        a = theory.hertz_radius(delta, p.radius)
+    ax1.plot(delta, P, "k--", lw=0.8, label=label)
+    ax2.plot(P, a, "k--", lw=0.8, label=label if p.shape != "flat_punch" else None)
+
+
+# ---- one run ------------------------------------------------------------------
+@styled
+def plot_curve(curve, params=None, path=None, title=None, hertz=True):
+    """Two panels: (a) force against indentation, (b) contact radius against force;
+    loading blue, unloading red, the final snap-off as a jump, with the analytical
+    reference for the run's shape (Hertz, or Boussinesq's flat punch) dashed."""
+    fig, (ax1, ax2) = figure(2)
+    draw_branches(ax1, ax2, curve)
+    if hertz and params is not None:
+        draw_reference(ax1, ax2, params, float(curve["indent"].max()))
+    _curve_axes(ax1, ax2)
+    if title is None and params is not None:
+        title = run_caption(params)
+    if title:
+        fig.suptitle(title, fontsize=8)
+    return _save(fig, path)
+
+
+def _curve_axes(ax1, ax2):
+    ax1.set_xlabel(INDENT_LABEL)
+    ax1.set_ylabel(FORCE_LABEL)
+    ax2.set_xlabel(FORCE_LABEL)
+    ax2.set_ylabel("contact radius $a$")
+    for ax in (ax1, ax2):
+        ax.axhline(0, color="0.7", lw=0.5)
+        ax.legend(loc="best")
+    tidy_ticks(ax1, ax2)
+    letter((ax1, ax2))
+
+
+# ---- contact maps (tfm show, tfm animate) -------------------------------------------
+CONTACT_CMAP = "RdBu_r"          # diverging: tension (F > 0) red, compression blue
+
+
+def force_limits(f_th_max, fields_force_min):
+    """Colour limits: from the most compressive force shown up to the threshold F_th (a
+    spring in contact never carries more tension), zero at the centre of the map."""
+    hi = max(float(f_th_max), 1e-300)
+    return min(float(fields_force_min), -hi), hi
+
+
+class ContactMap:
+    """The force per spring on a diverging map (tension red, compression blue; the colour
+    bar ends at the threshold F_th, marked), springs released by a snap in grey, and the
+    contact line (boundary of the contact set) in black. ``update(snap)`` redraws only
+    what changes, for animations."""
+
+    def __init__(self, ax, fields, snap, vlim=None, colorbar=True):
+        import matplotlib as mpl
+
+        self.ax, self.fields = ax, fields
+        self.f_th = float(np.nanmax(fields.f_th))
+        if vlim is None:
+            con = np.asarray(snap["state"]) == 1
+            vlim = force_limits(self.f_th, np.asarray(snap["F"])[con].min() if con.any() else 0.0)
+        self.norm = mpl.colors.TwoSlopeNorm(vcenter=0.0, vmin=vlim[0], vmax=vlim[1])
+        self.contour = None
+        shown, released = self._layers(snap)
+        if fields.grid:
+            half = 0.5 * (fields.x[1] - fields.x[0])
+            self.extent = [fields.x[0] - half, fields.x[-1] + half, fields.y[0] - half, fields.y[-1] + half]
+            # arrays are [x, y]: transposed, x runs left to right and y upwards
+            self.image = ax.imshow(shown.T, origin="lower", extent=self.extent, cmap=CONTACT_CMAP,
+                                   norm=self.norm, interpolation="nearest")
+            self.grey = ax.imshow(released.T, origin="lower", extent=self.extent,
+                                  cmap=mpl.colors.ListedColormap(["0.75"]), interpolation="nearest")
+        else:
+            x, y = fields.x, fields.y
+            ax.set_xlim(x.min(), x.max())
+            ax.set_ylim(y.min(), y.max())
+            spacing = float(fields.params.get("spacing", (x.max() - x.min()) / max(1.0, x.size ** 0.5)))
+            axis_pt = 0.42 * WIDTH * 72.0            # the map panel is about 0.42 of the width
+            size = (1.15 * axis_pt * spacing / (x.max() - x.min())) ** 2
+            self.grey = ax.scatter(x, y, s=size, c="0.75", marker="h", linewidths=0)
+            self.image = ax.scatter(x, y, s=size, c=shown, cmap=CONTACT_CMAP, norm=self.norm, marker="h",
+                                    linewidths=0, plotnonfinite=False)
+            self.grey.set_alpha(released)
+        self._line(snap)
+        ax.set_aspect("equal")
+        ax.set_xlabel("$x$")
+        ax.set_ylabel("$y$")
+        if colorbar:
+            cb = ax.figure.colorbar(self.image, ax=ax, shrink=0.9, pad=0.02)
+            cb.set_label("spring force $F$ (tension > 0)")
+            lo = self.norm.vmin
+            ticks = [lo, 0.5 * lo, 0.0, 0.5 * self.f_th, self.f_th]
+            cb.set_ticks(ticks, labels=[number(t, 2) for t in ticks[:-1]] + [f"$F_{{th}}$ = {number(self.f_th, 2)}"])
+            cb.ax.axhline(self.f_th, color="k", lw=1.5)
+
+    def _layers(self, snap):
+        F = np.asarray(snap["F"], dtype=float)
+        state = np.asarray(snap["state"])
+        shown = np.where(state == 1, F, np.nan)
+        released = (state == 2).astype(float) if not self.fields.grid else np.where(state == 2, 1.0, np.nan)
+        return shown, released
+
+    def _line(self, snap):
+        if self.contour is not None:
+            self.contour.remove()
+            self.contour = None
+        con = np.asarray(snap["state"]) == 1
+        if not con.any():
+            return
+        if self.fields.grid:
+            if (~con).any():
+                self.contour = self.ax.contour(self.fields.x, self.fields.y, con.astype(float).T, levels=[0.5],
+                                               colors="k", linewidths=0.8)
+        else:
+            self.contour = _hull_line(self.ax, self.fields, con)
+
+    def artists(self):
+        """What changes from one snapshot to the next."""
+        return [a for a in (self.image, self.grey, self.contour) if a is not None]
+
+    def update(self, snap):
+        shown, released = self._layers(snap)
+        if self.fields.grid:
+            self.image.set_data(shown.T)
+            self.grey.set_data(released.T)
+        else:
+            self.image.set_array(shown)
+            self.grey.set_alpha(released)
+        self._line(snap)
+
+
+def _hull_line(ax, fields, con):
+    """Contact line of a scattered layout: the outermost contact spring per angle bin."""
+    if con.sum() < 8:
+        return None
+    x, y = fields.x[con], fields.y[con]
+    ang = np.arctan2(y, x)
+    r = np.hypot(x, y)
+    k = np.digitize(ang, np.linspace(-np.pi, np.pi, 73))
+    pts = [(ang[k == b][np.argmax(r[k == b])], r[k == b].max()) for b in np.unique(k)]
+    th, rr = np.array(pts).T
+    th, rr = np.append(th, th[0] + 2 * np.pi), np.append(rr, rr[0])
+    (line,) = ax.plot(rr * np.cos(th), rr * np.sin(th), "k-", lw=0.8)
+    return line
+
+
+EVENT_TEXT = {"pull_off": "pull-off", "max_load": "maximum load", "first_snap": "first snap",
+              "last_contact": "last step in contact"}
+
+
+def snapshot_title(snap) -> str:
+    events = [EVENT_TEXT.get(e, "") for e in snap["event"].split(",") if e in EVENT_TEXT]
+    ev = f" ({', '.join(events)})" if events else ""
+    return (f"step {snap['step']}{ev}: $\\delta$ = {number(-snap['d'])}, $P$ = {number(snap['force'])}, "
+            f"{snap['n_contact']} springs in contact")
+
+
+def draw_curve_marker_panel(ax, curve):
+    """P(delta) with both branches, for a panel beside a contact map; returns the marker."""
+    draw_branches(ax, _NullAxes(), curve)
+    (marker,) = ax.plot([], [], "o", color="k", ms=5, label="snapshot")
+    ax.set_xlabel(INDENT_LABEL)
+    ax.set_ylabel(FORCE_LABEL)
+    ax.axhline(0, color="0.7", lw=0.5)
+    ax.legend(loc="best")
+    tidy_ticks(ax)
+    return marker
+
+
+def map_figure(params, with_curve=True):
+    ncols = 2 if with_curve else 1
+    fig, axes = figure(ncols, height=3.3, width=WIDTH if with_curve else 4.0)
+    fig.get_layout_engine().set(wspace=0.12)
+    letter(axes)
+    return fig, axes
+
+
+@styled
+def plot_contact_map(fields, snap, curve=None, params=None, path=None):
+    """(a) the contact map of one snapshot; (b), given the curve, P(delta) with the
+    snapshot marked."""
+    fig, axes = map_figure(params, curve is not None)
+    ContactMap(axes[0], fields, snap)
+    tidy_ticks(axes[0])
+    if curve is not None:
+        marker = draw_curve_marker_panel(axes[1], curve)
+        marker.set_data([-snap["d"]], [snap["force"]])
+    head = run_caption(params) + "\n" if params is not None else ""
+    fig.suptitle(head + snapshot_title(snap), fontsize=8)
+    return _save(fig, path)
+
+
+class _NullAxes:
+    """Stands in for a panel that is not drawn."""
+
+    def plot(self, *a, **k):
+        return []
+
+    def annotate(self, *a, **k):
+        return None
+
+
+# ---- the paper's figures (tfm.paper) -------------------------------------------
+@styled
 def plot_hertz_validation(curves, radius, path=None, title=None):
     """Paper Fig. 2: (a) indentation against force, (b) force against contact radius, on
     the loading branch, one colour per spacing, the Hertz solution dashed.
 
     ``curves`` maps spacing -> curve DataFrame."""
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (ax1, ax2) = figure(2)
     dmax = 0.0
     for (spacing, curve), colour in zip(sorted(curves.items(), reverse=True), SPACING_COLOURS):
         load = curve[curve["phase"] == "load"]
         dmax = max(dmax, float(load["indent"].max()))
-        ax1.plot(load["force"], load["indent"], ".", ms=3, color=colour, label=_spacing_label(spacing))
-        ax2.plot(load["contact_radius"], load["force"], ".", ms=3, color=colour, label=_spacing_label(spacing))
+        ax1.plot(load["force"], load["indent"], ".", ms=2.5, color=colour, label=_spacing_label(spacing))
+        ax2.plot(load["contact_radius"], load["force"], ".", ms=2.5, color=colour, label=_spacing_label(spacing))
     delta = np.linspace(0, dmax, 300)
     P = theory.hertz_force(delta, radius)
     ax1.plot(P, delta, "k--", lw=1, label="Hertz")
     ax2.plot(theory.hertz_radius(delta, radius), P, "k--", lw=1, label="Hertz")
-    ax1.set_xlabel("force $P$ (compression > 0)")
+    ax1.set_xlabel(FORCE_LABEL)
     ax1.set_ylabel("indentation $\\delta$")
     ax2.set_xlabel("contact radius $a$")
-    ax2.set_ylabel("force $P$ (compression > 0)")
-    ax1.set_title("(a) indentation vs force", fontsize=9)
-    ax2.set_title("(b) force vs contact radius", fontsize=9)
+    ax2.set_ylabel(FORCE_LABEL)
     for ax in (ax1, ax2):
-        ax.legend(frameon=False, fontsize=8)
+        ax.legend()
+    tidy_ticks(ax1, ax2)
+    letter((ax1, ax2))
     if title:
-        fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+        fig.suptitle(title, fontsize=8)
     return _save(fig, path)
 
 
+@styled
 def plot_load_unload(curve, radius, k_ic=None, path=None, title=None):
-    """Paper Fig. 3: ``plot_curve``'s two panels (loading blue, unloading red), with Hertz
-    dashed and, given the effective toughness ``k_ic``, the JKR curve dotted (its
-    receding branch, a up to the preload radius)."""
-    fig = plot_curve(curve, params=None, path=None, title=title, hertz=False)
-    ax1, ax2 = fig.axes[:2]
+    """Paper Fig. 3: ``plot_curve``'s two panels (loading blue, unloading red, the final
+    snap-off as a jump), Hertz dashed and, given the effective toughness ``k_ic``, the JKR
+    curve dotted (its receding branch, a up to the preload radius). The body is a paraboloid."""
+    fig, (ax1, ax2) = figure(2)
+    draw_branches(ax1, ax2, curve)
     dmax = float(curve["indent"].max())
     delta = np.linspace(0, dmax, 300)
     P = theory.hertz_force(delta, radius)
@@ -110,31 +440,33 @@ def plot_load_unload(curve, radius, k_ic=None, path=None, title=None):
         d_j, P_j = theory.jkr_curve(k_ic, radius, a)
         ax1.plot(d_j, P_j, "k:", lw=1.2, label=f"JKR, $K$ = {k_ic:.3g}")
         ax2.plot(P_j, a, "k:", lw=1.2, label="JKR")
-    for ax in (ax1, ax2):
-        ax.legend(frameon=False, fontsize=8)
+    _curve_axes(ax1, ax2)
+    if title:
+        fig.suptitle(title, fontsize=8)
     return _save(fig, path)
 
 
+@styled
 def plot_refinement(curves, radius, k_ic=None, path=None, title=None, zoom=True, predicted_slope=None):
     """Paper Figs. 4 and 5: load-unload curves at several spacings, one colour per
     spacing (loading thin, unloading thick). (a) force against indentation, (b) contact
     radius against force, (c) F_max against spacing (log-log) with the predicted slope.
     ``k_ic`` (a number, or a dict spacing -> K_eff) overlays the JKR curve(s) dotted.
     With ``zoom`` the axes are cut to show the tensile part."""
-    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(14, 4.2))
+    fig, (ax1, ax2, ax3) = figure(3, height=2.6)
     fmin, xmax, xmin = 0.0, 0.0, 0.0
     fmax_by = {}
+    dmax = 0.0
     for (spacing, curve), colour in zip(sorted(curves.items(), reverse=True), SPACING_COLOURS):
         load = curve[curve["phase"] == "load"]
         unload = curve[curve["phase"] == "unload"]
         fmin = min(fmin, float(curve["force"].min()))
         fmax_by[spacing] = -float(curve["force"].min())
         xmin = min(xmin, float(unload["indent"].min()))
-        lab = _spacing_label(spacing)
-        ax1.plot(load["indent"], load["force"], "-", lw=0.6, color=colour, alpha=0.6)
-        ax1.plot(unload["indent"], unload["force"], "-", lw=1.2, color=colour, label=lab + " (unload)")
-        ax2.plot(load["force"], load["contact_radius"], "-", lw=0.6, color=colour, alpha=0.6)
-        ax2.plot(unload["force"], unload["contact_radius"], "-", lw=1.2, color=colour, label=lab)
+        ax1.plot(load["indent"], load["force"], "-", lw=0.5, color=colour, alpha=0.6)
+        ax2.plot(load["force"], load["contact_radius"], "-", lw=0.5, color=colour, alpha=0.6)
+        draw_branches(ax1, ax2, unload, colours={"unload": colour}, lw=1.1, labels=False)
+        ax1.plot([], [], "-", lw=1.1, color=colour, label=_spacing_label(spacing))
         dmax = float(curve["indent"].max())
     if zoom and fmin < 0:
         for curve in curves.values():
@@ -147,13 +479,14 @@ def plot_refinement(curves, radius, k_ic=None, path=None, title=None, zoom=True,
             a = np.linspace(1e-4, float(theory.hertz_radius(dmax, radius)), 400)
             d_j, P_j = theory.jkr_curve(k, radius, a)
             c = "k" if spacing is None else colour
-            ax1.plot(d_j, P_j, ":", lw=1.2, color=c)
-            ax2.plot(P_j, a, ":", lw=1.2, color=c)
-        ax1.plot([], [], "k:", label="JKR (dotted)")
-    ax1.plot([], [], "-", lw=0.6, color="0.5", label="loading (thin)")
-    ax1.set_xlabel("indentation $\\delta = -d$")
-    ax1.set_ylabel("force $P$ (compression > 0)")
-    ax2.set_xlabel("force $P$ (compression > 0)")
+            ax1.plot(d_j, P_j, ":", lw=1.1, color=c)
+            ax2.plot(P_j, a, ":", lw=1.1, color=c)
+        ax1.plot([], [], "k:", label="JKR")
+    ax1.plot([], [], "-", lw=0.5, color="0.5", label="loading (thin)")
+    ax1.plot([], [], "o", mfc="white", mec="0.3", ms=3.5, label="after snap-off (jump)")
+    ax1.set_xlabel(INDENT_LABEL)
+    ax1.set_ylabel(FORCE_LABEL)
+    ax2.set_xlabel(FORCE_LABEL)
     ax2.set_ylabel("contact radius $a$")
     if zoom and fmin < 0:
         ax1.set_ylim(1.3 * fmin, -4.0 * fmin)
@@ -161,13 +494,10 @@ def plot_refinement(curves, radius, k_ic=None, path=None, title=None, zoom=True,
         ax2.set_xlim(1.3 * fmin, -4.0 * fmin)
     for ax in (ax1, ax2):
         ax.axhline(0, color="0.7", lw=0.5)
-        ax.legend(frameon=False, fontsize=7)
-    ax2.ticklabel_format(axis="x", style="sci", scilimits=(-2, 2))
-    ax1.set_title("(a) force vs indentation (tensile part)", fontsize=9)
-    ax2.set_title("(b) contact radius vs force", fontsize=9)
+    ax1.legend(fontsize=6)
     sp = np.array(sorted(fmax_by))
     fm = np.array([fmax_by[s] for s in sp])
-    ax3.loglog(sp, fm, "o-", color="tab:blue", label="tfm $F_{max}$")
+    ax3.loglog(sp, fm, "o-", color="tab:blue", ms=4, label="tfm $F_{max}$")
     if k_ic:
         ks = k_ic if isinstance(k_ic, dict) else {s: k_ic for s in sp}
         ax3.loglog(sp, [theory.jkr_pull_off(ks[s], radius) for s in sp], "k:", marker="x",
@@ -179,25 +509,27 @@ def plot_refinement(curves, radius, k_ic=None, path=None, title=None, zoom=True,
     lo, hi = float(fm.min()), float(fm.max())
     if hi / lo < 10:                      # show a near-constant series as near-constant
         ax3.set_ylim(lo / 3.0, hi * 3.0)
+    fraction_ticks(ax3, sp)
     ax3.set_xlabel("spacing $\\Delta$")
     ax3.set_ylabel("$F_{max}$")
-    ax3.set_title("(c) pull-off force against spacing", fontsize=9)
-    ax3.legend(frameon=False, fontsize=7)
+    ax3.legend(fontsize=6)
+    tidy_ticks(ax1, ax2)
+    letter((ax1, ax2, ax3))
     if title:
-        fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+        fig.suptitle(title, fontsize=8)
     return _save(fig, path)
 
 
+@styled
 def plot_jkr_scaling(k_data, r_data, k_fit, r_fit, coef_fit, path=None, title=None):
     """Paper Fig. 6: (a) F_max against K_th^2 (R = 1), (b) F_max against R. Points,
     the fitted line F = c K^2 R, the paper's 7.6 and JKR/LEFM's 3 pi^2/4.
 
     ``k_data`` / ``r_data``: DataFrames with columns k_th, radius, f_max. ``k_fit`` and
     ``r_fit`` are tfm.analysis.PowerLawFit, ``coef_fit`` a LineFit of F on K^2 R."""
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (ax1, ax2) = figure(2)
     k2 = k_data["k_th"].to_numpy() ** 2
-    ax1.plot(k2, k_data["f_max"], "o", color="tab:blue", label="tfm")
+    ax1.plot(k2, k_data["f_max"], "o", ms=4, color="tab:blue", label="tfm")
     kk = np.linspace(0, k2.max() * 1.05, 50)
     r0 = float(k_data["radius"].iloc[0])
     ax1.plot(kk, coef_fit.slope * kk * r0, "-", color="tab:blue", lw=1,
@@ -206,10 +538,10 @@ def plot_jkr_scaling(k_data, r_data, k_fit, r_fit, coef_fit, path=None, title=No
     ax1.plot(kk, theory.JKR_COEFFICIENT * kk * r0, ":", color="k", lw=1.2, label="JKR/LEFM: $3\\pi^2/4$ = 7.40")
     ax1.set_xlabel("$K_{th}^2$")
     ax1.set_ylabel("$F_{max}$")
-    ax1.set_title(f"(a) R = {r0:g}; exponent of $K_{{th}}$: {k_fit.text(3)}", fontsize=9)
+    ax1.set_title(f"$R$ = {r0:g}; exponent of $K_{{th}}$: {k_fit.text(3)}")
     R = r_data["radius"].to_numpy()
     k0 = float(r_data["k_th"].iloc[0])
-    ax2.plot(R, r_data["f_max"], "o", color="tab:blue", label="tfm")
+    ax2.plot(R, r_data["f_max"], "o", ms=4, color="tab:blue", label="tfm")
     rr = np.linspace(0, R.max() * 1.05, 50)
     ax2.plot(rr, r_fit.predict(np.maximum(rr, 1e-12)), "-", color="tab:blue", lw=1,
              label=f"power-law fit, exponent {r_fit.exponent:.3f}")
@@ -217,44 +549,55 @@ def plot_jkr_scaling(k_data, r_data, k_fit, r_fit, coef_fit, path=None, title=No
     ax2.plot(rr, theory.JKR_COEFFICIENT * k0 ** 2 * rr, ":", color="k", lw=1.2, label="JKR/LEFM: 7.40 $K^2R$")
     ax2.set_xlabel("radius $R$")
     ax2.set_ylabel("$F_{max}$")
-    ax2.set_title(f"(b) $K_{{th}}$ = {k0:g}; exponent of R: {r_fit.text(3)}", fontsize=9)
+    ax2.set_title(f"$K_{{th}}$ = {k0:g}; exponent of $R$: {r_fit.text(3)}")
     for ax in (ax1, ax2):
         ax.set_xlim(left=0)
         ax.set_ylim(bottom=0)
-        ax.legend(frameon=False, fontsize=8)
+        ax.legend(loc="upper left")
+    tidy_ticks(ax1, ax2)
+    letter((ax1, ax2))
     if title:
-        fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+        fig.suptitle(title, fontsize=8)
     return _save(fig, path)
 
 
+@styled
 def plot_kernel_study(summary, slopes, crossings, path=None, title=None):
     """Section 3.2: one panel per kernel with F_max against spacing (log-log, normalized
     by the coarsest spacing, one line per alpha), and a last panel with the spacing
     slope against alpha per kernel, the fitted line and its zero crossing alpha*."""
+    from matplotlib import colormaps
+
     kernels = sorted(summary["p_kernel"].unique())
-    fig, axes = plt.subplots(1, len(kernels) + 1, figsize=(4.2 * (len(kernels) + 1), 4.2))
+    n = len(kernels) + 1
+    ncols = 2 if n > 3 else n
+    nrows = math.ceil(n / ncols)
+    fig, axes = figure(ncols, nrows, height=2.6 * nrows)
+    for ax in axes[n:]:
+        ax.set_visible(False)
     markers = {"boussinesq": "o", "local": "s", "neighbors": "^"}
     colours = {"boussinesq": "tab:blue", "local": "tab:green", "neighbors": "tab:orange"}
-    cmap = plt.get_cmap("viridis")
+    cmap = colormaps["viridis"]
     for ax, kernel in zip(axes, kernels):
         part = summary[summary["p_kernel"] == kernel]
         alphas = sorted(part["p_alpha"].unique())
+        spacings = sorted(part["p_spacing"].unique())
         for i, alpha in enumerate(alphas):
             g = part[part["p_alpha"] == alpha].sort_values("p_spacing")
             f0 = g["r_pull_off_force"].iloc[-1]
-            ax.loglog(g["p_spacing"], g["r_pull_off_force"] / f0, "-", marker=markers.get(kernel, "o"), ms=4,
+            ax.loglog(g["p_spacing"], g["r_pull_off_force"] / f0, "-", marker=markers.get(kernel, "o"), ms=3.5,
                       color=cmap(i / max(1, len(alphas) - 1)), label=f"$\\alpha$ = {alpha:g}")
         ax.axhline(1.0, color="0.6", lw=0.6)
+        fraction_ticks(ax, spacings)
         ax.set_xlabel("spacing $\\Delta$")
         ax.set_ylabel("$F_{max}$ / $F_{max}$(coarsest)")
-        ax.set_title(f"{kernel}", fontsize=9)
-        ax.legend(frameon=False, fontsize=7)
-    ax2 = axes[-1]
-    for k_i, (kernel, g) in enumerate(slopes.groupby("p_kernel")):
+        ax.set_title(f"{kernel} kernel")
+        ax.legend(fontsize=6)
+    ax2 = axes[len(kernels)]
+    for kernel, g in slopes.groupby("p_kernel"):
         c = colours.get(kernel)
         ax2.errorbar(g["p_alpha"], g["slope"], yerr=[g["slope"] - g["ci_low"], g["ci_high"] - g["slope"]],
-                     fmt=markers.get(kernel, "o"), color=c, ms=5, capsize=2,
+                     fmt=markers.get(kernel, "o"), color=c, ms=4, capsize=2,
                      label=f"{kernel}: $\\alpha^*$ = {crossings[kernel].text(3)}" if kernel in crossings else kernel)
         zc = crossings.get(kernel)
         if zc is not None:
@@ -264,9 +607,10 @@ def plot_kernel_study(summary, slopes, crossings, path=None, title=None):
     ax2.axhline(0, color="0.6", lw=0.6)
     ax2.set_xlabel("$\\alpha$")
     ax2.set_ylabel("d ln $F_{max}$ / d ln $\\Delta$")
-    ax2.set_title("spacing slope; zero crossing = convergent $\\alpha$", fontsize=9)
-    ax2.legend(frameon=False, fontsize=7, loc="upper left")
+    ax2.set_title("spacing slope; zero crossing = convergent $\\alpha$")
+    ax2.legend(fontsize=6, loc="lower right")
+    tidy_ticks(ax2)
+    letter(axes[:n])
     if title:
-        fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+        fig.suptitle(title, fontsize=8)
     return _save(fig, path)

@@ -11,6 +11,7 @@ import json
 import math
 import os
 import platform
+import shutil
 import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,15 +68,36 @@ class RunResult:
     curve: pd.DataFrame
     summary: dict[str, Any]
     provenance: dict[str, Any] = field(default_factory=dict)
+    fields_path: Path | None = None     # the field snapshots (NetCDF4), if any
 
     @property
     def ok(self) -> bool:
         return not self.summary["warnings"]
 
     def write_curve(self, path: str | os.PathLike) -> Path:
+        """Write the curve table; field snapshots, if any, move beside it as
+        ``<stem>.fields.nc`` and the table's metadata names them (``fields``)."""
         from .units import unit_labels
-        return write_table(self.curve, path, self.params, self.provenance, self.summary,
-                           extra={"units": unit_labels(self.params)})
+
+        path = Path(path)
+        extra = {"units": unit_labels(self.params)}
+        if self.fields_path is not None:
+            dest = fields_path_for(path)
+            if Path(self.fields_path).resolve() != dest.resolve():
+                # through a temporary name in the destination folder: a kill leaves no half file
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                tmp = dest.with_name(f".{dest.name}.{os.getpid()}.tmp")
+                shutil.move(str(self.fields_path), tmp)
+                os.replace(tmp, dest)
+                self.fields_path = dest
+            extra["fields"] = dest.name
+        return write_table(self.curve, path, self.params, self.provenance, self.summary, extra=extra)
+
+
+def fields_path_for(curve_path: str | os.PathLike) -> Path:
+    """Where a curve table's field snapshots live: beside it, ``<stem>.fields.nc``."""
+    curve_path = Path(curve_path)
+    return curve_path.with_name(curve_path.stem + ".fields.nc")
 
 
 def curve_frame(steps) -> pd.DataFrame:
@@ -110,7 +132,13 @@ def summarize(curve: pd.DataFrame, out, p: Params, n_springs: int, grid_side: in
     if not out.unload_complete:
         warnings.append("unloading stopped at max_unload_steps with springs still in contact")
     first_snap = unload[unload["n_snapped"] > 0]
+    # force control: the last load the contact held before it broke (tfm.protocol)
+    held = unload[unload["n_contact"] > 0]
+    jump = p.control == "force" and out.unload_complete and len(held) > 0
     return {
+        "jump_off_force": float(-held["force"].iloc[-1]) if jump else math.nan,
+        "jump_off_contact_radius": float(held["contact_radius"].iloc[-1]) if jump else math.nan,
+        "jump_off_indent": float(held["indent"].iloc[-1]) if jump else math.nan,
         "pull_off_force": float(max(tension[k], 0.0)) if len(curve) else 0.0,
         "pull_off_indent": float(curve["indent"].iloc[k]) if len(curve) else math.nan,
         "pull_off_contact_radius": float(curve["contact_radius"].iloc[k]) if len(curve) else math.nan,

@@ -10,7 +10,7 @@ from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
 from .params import Params
 from .results import RunResult, curve_frame, provenance, summarize
-from .solver import Problem, run_protocol
+from .solver import Problem
 from .threshold import threshold_forces
 from .units import to_paper, to_si_curve, to_si_summary, unit_labels
 
@@ -35,9 +35,15 @@ def build_problem(p: Params) -> tuple[Problem, object]:
     return prob, layout
 
 
-def simulate(p: Params | None = None, *, progress=None, **overrides) -> RunResult:
-    """Run the paper's loading-unloading protocol. ``simulate(spacing=1/64, k_th=0.02)``
-    and ``simulate(Params(...))`` both work. Suspect results carry flags and warn."""
+def simulate(p: Params | None = None, *, progress=None, fields_path=None, **overrides) -> RunResult:
+    """Run the loading protocol of ``p.control`` (tfm.protocol). ``simulate(spacing=1/64,
+    k_th=0.02)`` and ``simulate(Params(...))`` both work. Suspect results carry flags and warn.
+
+    ``progress(record)`` is called after every step. With ``p.snapshots`` other than
+    "none" the field snapshots stream to ``fields_path`` (NetCDF4, tfm.snapshots); without
+    a path they go to a temporary file that ``RunResult.write_curve`` moves beside the curve."""
+    from . import protocol
+
     if p is None:
         p = Params.from_dict(overrides) if overrides else Params()
     elif overrides:
@@ -49,16 +55,37 @@ def simulate(p: Params | None = None, *, progress=None, **overrides) -> RunResul
     # an SI record is solved as its paper-units twin (tfm.units, L* = 1 m), then scaled back
     q = to_paper(p)
     prob, layout = build_problem(q)
-    n_load = int(np.ceil(q.delta_max / q.step - 1e-9))
-    max_unload = q.max_unload_steps or (20 * n_load + 1000)
-    out = run_protocol(prob, q.delta_max, q.step, max_unload, progress=progress)
-    curve = curve_frame(out.steps)
-    summary = summarize(curve, out, q, layout.n, layout.shape[0] if layout.shape else None)
-    if p.units == "si":
-        curve, summary = to_si_curve(curve, p), to_si_summary(summary, p)
-    labels = unit_labels(p)
-    summary["length_unit"], summary["force_unit"] = labels["length"], labels["force"]
-    summary["warnings"] = "; ".join(filter(None, notes + [summary["warnings"]]))
+    writer = None
+    if p.snapshots != "none":
+        from .snapshots import SnapshotWriter, temporary_fields_path
+
+        fields_path = fields_path or temporary_fields_path()
+        writer = SnapshotWriter(fields_path, q, layout, prob)   # fields in paper units
+
+    def observe(state, rec):
+        if writer is not None:
+            writer.observe(state, rec)
+        if progress is not None:
+            progress(rec)
+
+    try:
+        out = protocol.run(q, prob, observe)
+        curve = curve_frame(out.steps)
+        summary = summarize(curve, out, q, layout.n, layout.shape[0] if layout.shape else None)
+        if p.units == "si":
+            curve, summary = to_si_curve(curve, p), to_si_summary(summary, p)
+        labels = unit_labels(p)
+        summary["length_unit"], summary["force_unit"] = labels["length"], labels["force"]
+        summary["warnings"] = "; ".join(filter(None, notes + [summary["warnings"]]))
+        if writer is not None:
+            writer.close(summary)
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
     if summary["warnings"]:
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
-    return RunResult(p, curve, summary, prov)
+    res = RunResult(p, curve, summary, prov)
+    if writer is not None:
+        res.fields_path = writer.path
+    return res

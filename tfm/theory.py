@@ -33,6 +33,17 @@ def hertz_force(delta, radius):
     return 4.0 / 3.0 * E_STAR * math.sqrt(radius) * delta ** 1.5
 
 
+def hertz_indent(force, radius):
+    """The indentation at which the Hertz force equals ``force`` (inverse of hertz_force)."""
+    force = np.clip(np.asarray(force, dtype=float), 0.0, None)
+    return (3.0 * force / (4.0 * E_STAR * math.sqrt(radius))) ** (2.0 / 3.0)
+
+
+def flat_punch_force(delta, radius):
+    """Boussinesq's rigid flat punch of radius a = R: P = 2 E* a delta (Johnson 1985, Sec. 3.8)."""
+    return 2.0 * E_STAR * radius * np.clip(np.asarray(delta, dtype=float), 0.0, None)
+
+
 def hertz_radius(delta, radius):
     delta = np.clip(np.asarray(delta, dtype=float), 0.0, None)
     return np.sqrt(radius * delta)

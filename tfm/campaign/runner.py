@@ -30,6 +30,7 @@ class Outcome:
     result: Any = None
     error: str = ""
     traceback: str = ""
+    fields_bytes: bytes | None = None   # field snapshots sent back by a remote (Dask) worker
 
 
 def available_cores() -> int:
@@ -117,7 +118,7 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
     try:
         for run, outcome in outcomes:
             if outcome.result is not None:
-                store.write_run(run, outcome.result)
+                store.write_run(run, outcome.result, outcome.fields_bytes)
             else:
                 failed += 1
                 store.write_failure(run, outcome.error, outcome.traceback)
@@ -313,7 +314,15 @@ def _execute_dask(params, host_threads: dict[str, int], client_pid: int) -> Outc
     # the environment is per process: set it only in a worker process of its own, not
     # in a client that runs its workers in-process (LocalCluster(processes=False))
     _set_threads(threads, set_env=os.getpid() != client_pid)
-    return execute(params, f"dask[{threads} threads]")
+    outcome = execute(params, f"dask[{threads} threads]")
+    res = outcome.result
+    if res is not None and res.fields_path is not None:
+        # the worker's disk may not be the client's: send the snapshot file back
+        path = Path(res.fields_path)
+        outcome.fields_bytes = path.read_bytes()
+        path.unlink(missing_ok=True)
+        res.fields_path = None
+    return outcome
 
 
 def _run_dask(todo: list[Run], scheduler) -> Iterator[tuple[Run, Outcome]]:

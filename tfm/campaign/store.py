@@ -4,6 +4,8 @@ Layout under ``<results_dir>/<campaign name>/``::
 
     runs/<run_id>.parquet      one finished run: its curve, with params, summary and
                                provenance in the Parquet metadata (tfm.results.write_table)
+    runs/<run_id>.fields.nc    its field snapshots (NetCDF4, tfm.snapshots), if the run
+                               asked for them; summary column ``fields_path`` points to it
     failures/<run_id>.json     one failed run: parameters, error and traceback
     summary.parquet            one row per finished run: run_id, status, p_*, r_*, prov_*
     curves.parquet             every step of every finished run, with run_id
@@ -31,7 +33,7 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 from ..params import Params
-from ..results import git_commit, read_metadata, tfm_version, write_table
+from ..results import fields_path_for, git_commit, read_metadata, tfm_version, write_table
 from .spec import CampaignError, CampaignSpec, Run
 
 TABLES = ("summary", "curves", "failures")
@@ -172,8 +174,19 @@ class CampaignStore:
             return None
         return meta if meta.get("run_id") == run_id else None
 
-    def write_run(self, run: Run, result) -> Path:
-        """Store a finished run (a tfm.results.RunResult) atomically; clear its failure."""
+    def fields_path(self, run_id: str) -> Path:
+        """A run's field snapshots (NetCDF4), beside its run file."""
+        return fields_path_for(self.run_path(run_id))
+
+    def write_run(self, run: Run, result, fields_bytes: bytes | None = None) -> Path:
+        """Store a finished run (a tfm.results.RunResult) atomically; clear its failure.
+        Its field snapshots, a file of this machine or ``fields_bytes`` from a remote
+        worker, are moved beside the run file first, so a stored run has its fields."""
+        if fields_bytes is not None:
+            self.runs_dir.mkdir(parents=True, exist_ok=True)
+            tmp = self.runs_dir / f".{run.run_id}.fields.nc.{os.getpid()}.recv.tmp"
+            tmp.write_bytes(fields_bytes)
+            result.fields_path = tmp
         path = result.write_curve(self.run_path(run.run_id))
         self.failure_path(run.run_id).unlink(missing_ok=True)
         return path
@@ -230,7 +243,10 @@ class CampaignStore:
             path = self.run_path(rid)
             meta = read_metadata(path)
             summary = meta["summary"]
+            fields = meta.get("fields")
             rows.append({"run_id": rid, "status": "flagged" if summary.get("warnings") else "ok",
+                         # field snapshots of the run, relative to the campaign folder
+                         "fields_path": f"{self.runs_dir.name}/{fields}" if fields else None,
                          **param_columns(by_id[rid].params),
                          **{RESULT_PREFIX + k: v for k, v in summary.items()},
                          **{PROV_PREFIX + k: v for k, v in meta.get("provenance", {}).items()}})
@@ -246,7 +262,7 @@ class CampaignStore:
         from ..units import COLUMN_UNITS
         # per row, p_units says which system applies (r_length_unit, r_force_unit too)
         extra = {"campaign": record, "units": COLUMN_UNITS}
-        summary_df = _typed_frame(rows, ["run_id", "status"] + param_names())
+        summary_df = _typed_frame(rows, ["run_id", "status", "fields_path"] + param_names())
         curves_df = (pd.concat(curves, ignore_index=True) if curves
                      else pd.DataFrame({"run_id": pd.Series([], dtype=object)}))
         fail_cols = ["run_id"] + param_names() + ["error", "traceback", "host", "failed_at"]

@@ -1,0 +1,70 @@
+"""Force control (tfm.protocol.force_control) against displacement control.
+
+The paper (Sec. 3.1): under force control "the entire contact would break and the force
+drop to zero at the maximum tensile force". So the jump-off force is the displacement-
+controlled F_max, and the contact at jump-off is the one at F_max."""
+import numpy as np
+import pytest
+
+import tfm
+from tfm.params import ParameterError, Params
+
+STANDARD = dict(alpha=0.75, k_th=0.02, shape="paraboloid", radius=1.0, max_indent=0.05)
+
+
+@pytest.mark.parametrize("spacing", [1 / 64, 1 / 128])
+def test_jump_off_is_the_displacement_controlled_pull_off(spacing):
+    disp = tfm.simulate(spacing=spacing, **STANDARD).summary
+    res = tfm.simulate(spacing=spacing, control="force", **STANDARD)
+    s = res.summary
+    assert s["unload_complete"] and not s["warnings"]
+    # Displacement control samples F(d) every `step` and misses the top of the last
+    # linear stretch before a snap; force control finds it (bisection to load_step/1024).
+    # 1 % is the issue's bound; the measured gap is 0.7-0.8 %.
+    assert s["jump_off_force"] == pytest.approx(disp["pull_off_force"], rel=0.01)
+    assert s["jump_off_force"] >= disp["pull_off_force"]
+    # the same contact: within 2 spacings (the issue's bound; measured: equal)
+    assert abs(s["jump_off_contact_radius"] - disp["pull_off_contact_radius"]) <= 2 * spacing
+    last = res.curve.iloc[-1]
+    assert last["n_contact"] == 0 and last["force"] == 0.0
+
+
+def test_held_loads_are_the_targets():
+    """Each held step carries its target load: the Newton step on a fixed contact set is exact."""
+    p = Params(spacing=1 / 32, control="force", load_step=2e-4, **STANDARD, f_th=None)
+    res = tfm.simulate(p)
+    c = res.curve
+    load = c[c["phase"] == "load"]
+    targets = np.minimum(np.arange(1, len(load) + 1) * p.load_decrement, p.peak_load)
+    # CG tolerance 1e-10 on the forces; the load is their sum
+    np.testing.assert_allclose(load["force"], targets, rtol=1e-8, atol=1e-12)
+    unload = c[(c["phase"] == "unload") & (c["n_contact"] > 0)]
+    first = unload.iloc[: len(unload) // 2]          # before the bisection of the last step
+    expected = p.peak_load - np.arange(1, len(first) + 1) * p.load_decrement
+    np.testing.assert_allclose(first["force"], expected, rtol=1e-8, atol=1e-12)
+
+
+def test_no_spring_in_contact_after_jump_off():
+    from tfm import protocol
+    from tfm.simulate import build_problem
+
+    p = Params(spacing=1 / 32, control="force", **STANDARD, f_th=None)
+    prob, _ = build_problem(p)
+    seen = []
+    protocol.run(p, prob, observe=lambda state, rec: seen.append((rec.n_contact, int(state.contact.sum()))))
+    assert seen[-1] == (0, 0)
+    assert all(n > 0 for n, _ in seen[:-1])
+
+
+@pytest.mark.parametrize("values, message", [
+    ({"max_load": 0.01}, "max_load: 0.01 has no effect here; it applies only when control='force'"),
+    ({"load_step": 1e-4}, "load_step: 0.0001 has no effect here; it applies only when control='force'"),
+    ({"control": "force", "max_load": -1}, "max_load: must be > 0"),
+    ({"control": "force", "max_load": 0.01, "max_indent": 0.05}, "max_indent: under control='force'"),
+    ({"control": "force", "shape": "flat_punch"}, "max_load: control='force' on a flat punch"),
+    ({"control": "force", "max_load": 0.01, "load_step": 0.1}, "load_step: must be <= max_load"),
+    ({"control": "forse"}, "control: unknown value 'forse'"),
+])
+def test_protocol_parameters_fail_early(values, message):
+    with pytest.raises(ParameterError, match=message):
+        Params.from_dict(values)

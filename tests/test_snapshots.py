@@ -1,0 +1,114 @@
+"""Field snapshots (tfm.snapshots): what is stored agrees with the curve table, exactly."""
+import numpy as np
+import pandas as pd
+import pytest
+
+import tfm
+from tfm.campaign import run_campaign, spec_from_dict
+from tfm.snapshots import STATE_CONTACT, Fields
+
+STANDARD = dict(alpha=0.75, k_th=0.02, shape="paraboloid", radius=1.0, max_indent=0.05)
+
+
+@pytest.fixture(scope="module")
+def every10(tmp_path_factory):
+    path = tmp_path_factory.mktemp("snap") / "curve.fields.nc"
+    res = tfm.simulate(spacing=1 / 64, snapshots=10, fields_path=path, **STANDARD)
+    return res, Fields(path)
+
+
+def test_field_sums_reproduce_the_curve_table_exactly(every10):
+    res, fields = every10
+    curve = res.curve.set_index("step")
+    periodic = [s for s in curve.index if s % 10 == 0]
+    assert set(periodic) <= set(fields.steps.tolist())
+    for step in fields.steps:
+        snap = fields.snapshot(step)
+        row = curve.loc[step]
+        # the same float64 values summed in the same order as the solver's -F.sum(): bit-equal
+        assert -snap["F"].ravel().sum() == row["force"]
+        assert int((snap["state"] == STATE_CONTACT).sum()) == row["n_contact"]
+        assert snap["d"] == row["d"] and snap["n_contact"] == row["n_contact"]
+
+
+def test_u_on_the_contact_set_is_d_minus_x0(every10):
+    res, fields = every10
+    tol = res.params.tol
+    x0 = fields.x0
+    checked = 0
+    for step in fields.steps:
+        snap = fields.snapshot(step)
+        con = snap["state"] == STATE_CONTACT
+        if not con.any():
+            continue
+        target = snap["d"] - x0[con]
+        # CG stops at ||d - x0 - C F||_2 <= tol ||d - x0||_2 on the set, which bounds every
+        # component; u = C F is then recomputed on the whole grid (round-off ~1e-15 |u|)
+        bound = tol * np.linalg.norm(target) + 1e-12 * np.abs(target).max()
+        assert np.abs(snap["u"][con] - target).max() <= bound
+        checked += 1
+    assert checked > 20
+
+
+def test_events_are_the_curve_extremes(every10):
+    res, fields = every10
+    c = res.curve
+    unload = c[c["phase"] == "unload"]
+    assert fields.event_step("max_load") == int(c.loc[c["force"].idxmax(), "step"])
+    assert fields.event_step("pull_off") == int(c.loc[c["force"].idxmin(), "step"])
+    assert fields.event_step("first_snap") == int(unload[unload["n_snapped"] > 0]["step"].iloc[0])
+    assert fields.event_step("last_contact") == int(c[c["n_contact"] > 0]["step"].iloc[-1])
+    # each step is stored once, with all its labels
+    assert len(set(fields.steps.tolist())) == len(fields.steps)
+    i = fields.position(fields.event_step("pull_off"))
+    assert "pull_off" in fields.events[i]
+
+
+def test_xarray_opens_the_file_in_one_line(every10):
+    xr = pytest.importorskip("xarray")
+    res, fields = every10
+    ds = xr.open_dataset(fields.path)
+    assert ds["F"].dims == ("step", "x", "y")
+    assert ds["F"].attrs["units"] == "F*"
+    k = fields.event_step("pull_off")
+    # the pull-off force is the tension, sum F (F > 0 tension)
+    assert float(ds["F"].sel(step=k).sum()) == pytest.approx(res.summary["pull_off_force"], rel=1e-12)
+    ds.close()
+
+
+def test_write_curve_moves_the_fields_beside_the_table(tmp_path):
+    res = tfm.simulate(spacing=1 / 16, step=2e-3, snapshots="events", **STANDARD)
+    tmp = res.fields_path
+    out = res.write_curve(tmp_path / "run.parquet")
+    assert not tmp.exists() and (tmp_path / "run.fields.nc").exists()
+    assert tfm.results.read_metadata(out)["fields"] == "run.fields.nc"
+
+
+def test_no_snapshots_no_file(tmp_path):
+    res = tfm.simulate(spacing=1 / 16, step=2e-3, **STANDARD)
+    assert res.fields_path is None
+    res.write_curve(tmp_path / "run.parquet")
+    assert list(tmp_path.iterdir()) == [tmp_path / "run.parquet"]
+
+
+def test_campaign_stores_one_fields_file_per_run_and_points_to_it(tmp_path):
+    spec = spec_from_dict({"name": "snap", "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
+                                                      "step": 2e-3, "snapshots": "events"},
+                           "sweep": {"alpha": [0.5, 0.75]}})
+    root = run_campaign(spec, quiet=True, results_dir=tmp_path)
+    summary = pd.read_parquet(root / "summary.parquet")
+    assert summary["fields_path"].notna().all()
+    for rel, rid in zip(summary["fields_path"], summary["run_id"]):
+        assert rel == f"runs/{rid}.fields.nc"
+        assert Fields(root / rel).attrs["run_id"] == rid
+    assert not list((root / "runs").glob(".*"))      # no temporary files left
+
+
+@pytest.mark.parametrize("bad, message", [
+    ({"snapshots": 0}, "snapshots: must be >= 1"),
+    ({"snapshots": "evnts"}, "snapshots: expected 'none', 'events' or a whole number"),
+    ({"snapshots": 2.5}, "snapshots: expected an integer"),
+])
+def test_bad_snapshot_values_fail_early(bad, message):
+    with pytest.raises(tfm.params.ParameterError, match=message):
+        tfm.Params.from_dict(bad)

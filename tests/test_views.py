@@ -1,0 +1,129 @@
+"""Figures and views of stored runs: `tfm plot`, `tfm show`, `tfm animate`, and the
+faults a reviewer would see (captions, references, the snap-off jump, overlapping ticks)."""
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import tfm
+from tfm import plots
+from tfm.cli import main
+
+STANDARD = dict(alpha=0.75, k_th=0.02, shape="paraboloid", radius=1.0, max_indent=0.05)
+
+
+def _ticks_overlap(fig):
+    """Pairs of visible tick labels on one axis whose boxes intersect (after drawing)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    bad = []
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            boxes = [t.get_window_extent(renderer) for t in axis.get_ticklabels()
+                     if t.get_visible() and t.get_text()]
+            for i in range(len(boxes)):
+                for j in range(i + 1, len(boxes)):
+                    if boxes[i].overlaps(boxes[j]):
+                        bad.append((ax.get_xlabel() or ax.get_ylabel(), i, j))
+    return bad
+
+
+CASES = {
+    # the default run's shape at a test-sized spacing; explicit F_th
+    "sphere": dict(spacing=1 / 32, step=1e-3, max_indent=0.05),
+    # the issue's flat punch R = 0.3
+    "flat_punch": dict(spacing=1 / 32, shape="flat_punch", radius=0.3, max_indent=0.01, step=1e-4),
+    # the issue's hexagonal layout with the tree operator at 1/64
+    "hexagonal": dict(spacing=1 / 64, layout="hexagonal", operator="tree", step=1e-3),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_default_figure_renders_without_faults(case, tmp_path):
+    res = tfm.simulate(**CASES[case])
+    p = res.params
+    fig = plots.plot_curve(res.curve, p, tmp_path / f"{case}.png")
+    assert (tmp_path / f"{case}.png").stat().st_size > 10_000
+    title = fig._suptitle.get_text()
+    assert "alpha" not in title and "\\alpha" not in title      # explicit F_th: alpha plays no part
+    assert f"1/{round(1 / p.spacing)}" in title and "delta_{max}" in title
+    labels = [t.get_text() for ax in fig.axes for t in ax.get_legend().get_texts()]
+    if case in ("sphere", "hexagonal"):
+        assert "Hertz (paraboloid approximation of the sphere)" in labels
+    else:
+        assert any("flat punch" in lab for lab in labels)
+    assert [t.get_text() for t in fig.texts][:2] == ["(a)", "(b)"] or \
+        {"(a)", "(b)"} <= {t.get_text() for ax in fig.axes for t in ax.texts}
+    # the unloading line stops at the last step in contact; the snap-off is a jump
+    ax1 = fig.axes[0]
+    unload = [ln for ln in ax1.get_lines() if ln.get_label() == "unload"][0]
+    last = res.curve[(res.curve["phase"] == "unload") & (res.curve["n_contact"] > 0)].iloc[-1]
+    assert unload.get_xdata()[-1] == last["indent"] and unload.get_ydata()[-1] == last["force"]
+    assert _ticks_overlap(fig) == []
+
+
+def test_alpha_is_named_when_it_acts():
+    p = tfm.Params(spacing=1 / 128, **STANDARD, f_th=None)
+    text = plots.run_caption(p)
+    assert "\\alpha$ = 0.75" in text and "K_{th}" in text and "1/128" in text and "paraboloid" in text
+
+
+def test_jkr_scaling_axis_has_no_overlapping_ticks():
+    from tfm.analysis import fit_line, fit_power_law
+
+    k = np.array([0.01, 0.02, 0.03, 0.04])
+    f = 7.9 * k ** 2
+    kd = pd.DataFrame({"k_th": k, "radius": 1.0, "f_max": f})
+    rd = pd.DataFrame({"k_th": 0.04, "radius": [0.25, 0.5, 1, 2], "f_max": 7.9 * 0.04 ** 2 * np.array([0.25, 0.5, 1, 2])})
+    fig = plots.plot_jkr_scaling(kd, rd, fit_power_law(k, f), fit_power_law(rd["radius"], rd["f_max"]),
+                                 fit_line(k ** 2, f, through_origin=True))
+    assert _ticks_overlap(fig) == []
+
+
+@pytest.fixture(scope="module")
+def stored_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("views") / "curve.parquet"
+    rc = main(["run", "--spacing", "1/64", "--alpha", "0.75", "--k-th", "0.02", "--shape", "paraboloid",
+               "--max-indent", "0.05", "--snapshots", "5", "-o", str(out), "-q", "--no-plot"])
+    assert rc == 0
+    return out
+
+
+def test_plot_and_show_from_a_stored_run(stored_run, capsys):
+    assert main(["plot", str(stored_run.parent)]) == 0
+    assert stored_run.with_suffix(".png").stat().st_size > 10_000
+    assert main(["show", str(stored_run), "--step", "pull_off"]) == 0
+    from tfm.snapshots import Fields
+
+    k = Fields(stored_run.with_name("curve.fields.nc")).event_step("pull_off")
+    assert stored_run.with_name(f"curve.step{k}.png").stat().st_size > 10_000
+    assert main(["show", str(stored_run), "--step", "3"]) == 2        # not stored: says which are
+    assert "nearest stored steps" in capsys.readouterr().err
+
+
+def test_animate_makes_a_gif_with_one_frame_per_unloading_snapshot(stored_run, tmp_path):
+    from PIL import Image
+
+    from tfm.snapshots import Fields
+
+    out = tmp_path / "unload.gif"
+    t0 = time.perf_counter()
+    assert main(["animate", str(stored_run), "-o", str(out)]) == 0
+    seconds = time.perf_counter() - t0
+    curve = pd.read_parquet(stored_run)
+    phase = dict(zip(curve["step"], curve["phase"]))
+    steps = Fields(stored_run.with_name("curve.fields.nc")).steps
+    expected = sum(phase[s] == "unload" for s in steps) + 1          # + the last loading step
+    assert Image.open(out).n_frames == expected
+    assert seconds < 60
+
+
+def test_show_without_snapshots_says_how_to_get_them(tmp_path, capsys):
+    out = tmp_path / "c.parquet"
+    tfm.simulate(spacing=1 / 16, step=2e-3, **STANDARD).write_curve(out)
+    assert main(["show", str(out)]) == 2
+    assert "--snapshots events" in capsys.readouterr().err

@@ -1,0 +1,79 @@
+"""Progress of a single run: a bar over the dilatation steps, and a note when the compiled
+kernels are not cached yet (the first run after an install or a code change compiles them).
+
+The bar is off with ``quiet``, when ``CI=true``, and when stderr is not a terminal.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+
+# Kernels every run calls: if one of these has no valid on-disk cache entry, the run
+# starts by compiling. Dispatchers defined in tfm.solver count too (the compiled step).
+HOT_KERNELS = (("tfm.kernels.grid", "blocked_dot"),)
+SOLVER_MODULE = "tfm.solver"
+
+
+def in_ci() -> bool:
+    return os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
+
+
+def _dispatchers():
+    import importlib
+
+    from numba.core.registry import CPUDispatcher
+
+    for module, name in HOT_KERNELS:
+        yield getattr(importlib.import_module(module), name)
+    for value in vars(importlib.import_module(SOLVER_MODULE)).values():
+        if isinstance(value, CPUDispatcher):
+            yield value
+
+
+def cold_kernels() -> list[str]:
+    """Names of hot kernels whose Numba cache is missing or stale (they will compile).
+
+    Reads each dispatcher's cache index, which Numba empties when the source changed.
+    Returns [] if the check itself is not possible (another Numba version)."""
+    cold = []
+    try:
+        for disp in {id(d): d for d in _dispatchers()}.values():
+            cache = getattr(disp, "_cache", None)
+            index = cache._cache_file._load_index() if hasattr(cache, "_cache_file") else {}
+            if not index:
+                cold.append(disp.py_func.__qualname__)
+    except (AttributeError, ImportError, OSError):
+        return []
+    return cold
+
+
+@contextlib.contextmanager
+def run_progress(p, quiet: bool = False, stream=None):
+    """A ``progress(record)`` callback for ``tfm.simulate`` that drives a tqdm bar."""
+    stream = stream or sys.stderr
+    if quiet:
+        yield None
+        return
+    cold = cold_kernels()
+    if cold:
+        print(f"compiling Numba kernels ({', '.join(cold)}; first run after an install or a code change, "
+              "cached for later runs) ...", file=stream, flush=True)
+    from tqdm.auto import tqdm
+
+    from .protocol import n_loading_steps
+
+    show = not in_ci() and (stream.isatty() if hasattr(stream, "isatty") else False)
+    bar = tqdm(total=None, desc=f"tfm run {p.run_id[:8]}", unit="step", file=stream,
+               disable=not show, dynamic_ncols=True, mininterval=0.2)
+    n_load = n_loading_steps(p)
+
+    def progress(rec) -> None:
+        bar.update(1)
+        bar.set_postfix_str(f"{rec.phase}{'' if rec.phase != 'load' else f' {rec.step + 1}/{n_load}'} "
+                            f"d={rec.d:+.4g} contact={rec.n_contact}", refresh=False)
+
+    try:
+        yield progress
+    finally:
+        bar.close()

@@ -1,0 +1,169 @@
+"""Loading protocols: the sequence of dilatation steps applied to a ContactState.
+
+- Displacement control (the paper's Algorithm 1, Sec. 2.1): push the flat in to
+  d = -delta_max in steps of ``step``, then pull it off in the same steps until no spring
+  touches. One curve row per step.
+- Force control: raise the compressive load P = -sum F to ``max_load``, then lower it in
+  steps of ``load_step`` into tension until the contact cannot hold the load. The paper
+  (Sec. 3.1): "If we did a force-controlled test, the entire contact would break and the
+  force drop to zero at the maximum tensile force."
+
+  On a fixed contact set the forces are linear in d, F(d') = F(d) + (d' - d) g with
+  g = ContactState.unit_response() (C_SS g = 1), so the d that carries a target load is
+  one Newton step away: d' = d + (P(d) - P_target) / sum(g). The step is exact unless
+  springs snap or enter; then the set changed, g is recomputed and the step repeated
+  until the set holds (the snap rounds of Algorithm 1 inside each load step). Lowering
+  the load past what the shrinking contact can carry makes every step snap more springs
+  until none is left: that is the jump-off. The last load held before it is refined by
+  bisection (each trial starts from a copy of the last held state), so the jump-off force
+  is resolved to ``load_step / 2**JUMP_BISECTIONS``, not to ``load_step``.
+
+Every recorded step is passed to ``observe(state, record)`` (progress bars, field
+snapshots). Nothing here writes files.
+"""
+from __future__ import annotations
+
+import copy
+import time
+from typing import Callable
+
+import numpy as np
+
+from .solver import ContactState, CurveResult, Problem, StepRecord
+
+# Bisections of the last load step before the jump-off: resolution load_step / 2**10.
+JUMP_BISECTIONS = 10
+
+Observer = Callable[[ContactState, StepRecord], None]
+
+
+def run(p, prob: Problem, observe: Observer | None = None) -> CurveResult:
+    """The protocol named by ``p.control`` (a validated tfm.Params)."""
+    n_load = n_loading_steps(p)
+    max_unload = p.max_unload_steps or (20 * n_load + 1000)
+    if p.control == "force":
+        return force_control(prob, p.peak_load, p.load_decrement, p.step, max_unload, observe)
+    return displacement_control(prob, p.delta_max, p.step, max_unload, observe)
+
+
+def n_loading_steps(p) -> int:
+    if p.control == "force":
+        return int(np.ceil(p.peak_load / p.load_decrement - 1e-9))
+    return int(np.ceil(p.delta_max / p.step - 1e-9))
+
+
+def displacement_control(prob: Problem, delta_max: float, step: float, max_unload_steps: int,
+                         observe: Observer | None = None) -> CurveResult:
+    """Load from d = 0 to d = -delta_max in steps of ``step``, then unload until no spring
+    is in contact (or max_unload_steps is reached, which is flagged)."""
+    out = CurveResult()
+    t0 = time.perf_counter()
+    state = ContactState(prob)
+    n_load = int(np.ceil(delta_max / step - 1e-9))
+    k = 0
+    for j in range(1, n_load + 1):
+        rec = state.advance(-min(j * step, delta_max), k, "load", out)
+        _record(out, state, rec, observe)
+        k += 1
+    out.unload_complete = False
+    for j in range(1, max_unload_steps + 1):
+        rec = state.advance(-delta_max + j * step, k, "unload", out)
+        _record(out, state, rec, observe)
+        k += 1
+        if rec.n_contact == 0:
+            out.unload_complete = True
+            break
+    out.wall_time = time.perf_counter() - t0
+    return out
+
+
+def force_control(prob: Problem, peak_load: float, load_step: float, first_step: float,
+                  max_unload_steps: int, observe: Observer | None = None) -> CurveResult:
+    """Raise P to ``peak_load`` in steps of ``load_step``, lower it in the same steps until
+    the contact breaks; refine the last load held by bisection. ``first_step`` is how far
+    the flat moves to make the first contact."""
+    out = CurveResult()
+    t0 = time.perf_counter()
+    state = ContactState(prob)
+    d, k = 0.0, 0
+    n_load = int(np.ceil(peak_load / load_step - 1e-9))
+    for j in range(1, n_load + 1):
+        rec, d, _ = _hold(state, min(j * load_step, peak_load), d, first_step, k, "load", out)
+        _record(out, state, rec, observe)
+        k += 1
+    out.unload_complete = False
+    held_load, held_state, held_d = peak_load, _copy_state(state), d
+    for j in range(1, max_unload_steps + 1):
+        target = peak_load - j * load_step
+        rec, d, ok = _hold(state, target, d, first_step, k, "unload", out)
+        if ok:
+            _record(out, state, rec, observe)
+            k += 1
+            held_load, held_state, held_d = target, _copy_state(state), d
+            continue
+        # the contact broke between held_load and target: bisect on copies of the held state
+        broken, broken_rec, hi = state, rec, target
+        for _ in range(JUMP_BISECTIONS):
+            mid = 0.5 * (held_load + hi)
+            trial = _copy_state(held_state)
+            trec, tdd, tok = _hold(trial, mid, held_d, first_step, k, "unload", out)
+            if tok:
+                _record(out, trial, trec, observe)
+                k += 1
+                held_load, held_state, held_d = mid, _copy_state(trial), tdd
+            else:
+                broken, broken_rec, hi = trial, trec, mid
+        broken_rec.step = k
+        _record(out, broken, broken_rec, observe)
+        out.unload_complete = True
+        break
+    out.wall_time = time.perf_counter() - t0
+    return out
+
+
+def _hold(state: ContactState, target: float, d: float, first_step: float, k: int, phase: str,
+          out: CurveResult) -> tuple[StepRecord, float, bool]:
+    """Move the flat until the contact carries the compressive load ``target`` on a set
+    that no longer changes. Returns the step's record (counts summed over the Newton
+    steps), the final d, and False if the contact broke (no spring left in contact)."""
+    prob = state.prob
+    rounds = iters = snapped = entered = 0
+    rec = None
+    for _ in range(prob.max_rounds):
+        had_contact = bool(state.contact.any())
+        if not had_contact:
+            if rec is not None and phase == "unload":
+                break
+            d_new = d - first_step          # bring the flat down to the first contact
+        else:
+            slope = float(state.unit_response().sum())    # d(sum F)/dd > 0 on the set
+            d_new = d + (-float(state.F.sum()) - target) / slope
+        rec = state.advance(d_new, k, phase, out)
+        d = d_new
+        rounds += rec.rounds
+        iters += rec.solver_iters
+        snapped += rec.n_snapped
+        entered += rec.n_entered
+        if rec.n_contact == 0 and phase == "unload":
+            break
+        if had_contact and rec.n_snapped == 0 and rec.n_entered == 0:
+            break                            # the Newton step was on this set: exact
+    else:
+        out.rounds_exceeded += 1
+    rec.rounds, rec.solver_iters, rec.n_snapped, rec.n_entered = rounds, iters, snapped, entered
+    return rec, d, rec.n_contact > 0
+
+
+def _copy_state(state: ContactState) -> ContactState:
+    """An independent copy of the state's arrays (the problem and operator are shared)."""
+    twin = copy.copy(state)
+    for name, value in vars(state).items():
+        if isinstance(value, np.ndarray):
+            setattr(twin, name, value.copy())
+    return twin
+
+
+def _record(out: CurveResult, state: ContactState, rec: StepRecord, observe: Observer | None) -> None:
+    out.steps.append(rec)
+    if observe is not None:
+        observe(state, rec)

@@ -1,0 +1,273 @@
+"""Field snapshots of a run: per spring F, u and contact state at chosen steps, streamed
+to a compressed NetCDF4 file (``<curve stem>.fields.nc``) while the run goes on.
+
+Format: NetCDF4 (HDF5) written with h5netcdf. One self-describing file per run, so it
+can be renamed into place atomically and stored beside its curve table; CF-style names,
+units and flag meanings; read in one line by xarray (``xr.open_dataset(path)``), and by
+netCDF tools in any language. ContactMechanics stores its fields the same way. (Zarr
+would be a directory of many small files per run, and is not installed here.)
+
+Layout::
+
+    dimensions  step (unlimited: one entry per snapshot, in the order written),
+                x, y on the square grid (F[step, x, y]), else spring (F[step, spring])
+    per spring  x, y (coordinates), x0 (undeformed height, NaN off the body), f_th, area
+    per step    step (the curve table's step), d, force (compression > 0), n_contact,
+                phase, event ("" or labels such as "every_10", "pull_off,first_snap")
+    fields      F (spring force, tension > 0), u (displacement), state
+                (0 never in contact, 1 in contact, 2 released: was in contact, is not)
+    attributes  run_id, params (JSON), summary (JSON), <event>_step for each event
+
+``snapshots = "events"`` stores the maximum load (largest compressive force), the
+pull-off (largest tensile force), the first snap and the last step in contact;
+``snapshots = k`` also stores every k-th step (step % k == 0). Memory and disk stay
+bounded: a snapshot is written when its step is done; events known only later (the
+force maxima, the last step in contact) keep one O(N) candidate copy each, written when
+the run ends. A step stored twice is stored once, with both labels. The step dimension is
+in writing order: ``ds.sortby("step")`` orders it, ``ds.sel(step=k)`` picks a step.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .results import _json_default, tfm_version
+
+STATE_NEVER, STATE_CONTACT, STATE_RELEASED = 0, 1, 2
+EVENTS = ("max_load", "pull_off", "first_snap", "last_contact")
+
+
+def temporary_fields_path() -> Path:
+    fd, name = tempfile.mkstemp(prefix="tfm-", suffix=".fields.nc")
+    os.close(fd)
+    return Path(name)
+
+
+class _Copy:
+    """One step's fields, copied (an event candidate)."""
+
+    __slots__ = ("rec", "F", "u", "state")
+
+    def __init__(self, rec, F, u, state):
+        self.rec = _plain(rec)
+        self.F, self.u, self.state = F.copy(), u.copy(), state.copy()
+
+
+def _plain(rec) -> dict:
+    return {"step": int(rec.step), "phase": rec.phase, "d": float(rec.d), "force": float(rec.force),
+            "n_contact": int(rec.n_contact), "n_snapped": int(rec.n_snapped)}
+
+
+class SnapshotWriter:
+    """Streams snapshots of one run to ``path`` (through a temporary file renamed at close)."""
+
+    def __init__(self, path, p, layout, prob):
+        import h5netcdf
+        import h5py
+
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        self.every = p.snapshots if isinstance(p.snapshots, int) else None
+        self.grid = layout.shape
+        self._index: dict[int, int] = {}        # step -> position along the step dimension
+        self._labels: list[str] = []
+        self._ever = np.zeros(layout.n, dtype=bool)
+        self._state = np.zeros(layout.n, dtype=np.int8)
+        self._best_load = self._best_pull = self._prev = None
+        self._first_snap_done = False
+        self._events: dict[str, int] = {}
+        f = self._f = h5netcdf.File(self._tmp, "w")
+        f.attrs.update({
+            "title": "tfm field snapshots (threshold-force model of adhesion)",
+            "Conventions": "CF-1.8",
+            "source": f"tfm {tfm_version()}",
+            "run_id": p.run_id,
+            "params": p.canonical_json(),
+            "units": "the paper's nondimensional units: length L*, force F* = 2 pi G L*^2 / (1 - nu)",
+            "sign_convention": "F > 0 is tension; force = -sum(F) is compressive-positive; indent = -d",
+            "snapshots": str(p.snapshots),
+        })
+        if self.grid is not None:
+            n, m = self.grid
+            f.dimensions = {"step": None, "x": n, "y": m}
+            space = ("x", "y")
+            xs = layout.x.reshape(self.grid)[:, 0]
+            ys = layout.y.reshape(self.grid)[0, :]
+            self._var("x", ("x",), xs, "spring x coordinate", "L*")
+            self._var("y", ("y",), ys, "spring y coordinate", "L*")
+        else:
+            f.dimensions = {"step": None, "spring": layout.n}
+            space = ("spring",)
+            self._var("x", space, layout.x, "spring x coordinate", "L*")
+            self._var("y", space, layout.y, "spring y coordinate", "L*")
+        self._space = space
+        x0 = np.where(np.isfinite(prob.x0), prob.x0, np.nan)
+        self._var("x0", space, self._shape(x0), "undeformed surface height (apex at 0; NaN: no surface)", "L*")
+        self._var("f_th", space, self._shape(prob.f_th), "tensile threshold force of the spring", "F*")
+        self._var("area", space, self._shape(prob.area), "tributary area of the spring", "L*^2")
+        self._var("step", ("step",), None, "step of the curve table", "1", dtype="i8")
+        self._var("d", ("step",), None, "height of the rigid flat (indentation = -d)", "L*", dtype="f8")
+        self._var("force", ("step",), None, "total force, compression > 0 (= -sum F)", "F*", dtype="f8")
+        self._var("n_contact", ("step",), None, "springs in contact", "1", dtype="i8")
+        text = h5py.string_dtype()
+        f.create_variable("phase", ("step",), dtype=text, chunks=(256,))
+        f.create_variable("event", ("step",), dtype=text, chunks=(256,))
+        f.variables["event"].attrs["long_name"] = "events at this step, comma-separated: " + ", ".join(EVENTS) \
+            + ", every_<k>"
+        chunks = (1,) + tuple(f.dimensions[s].size for s in space)
+        comp = dict(compression="gzip", compression_opts=4, shuffle=True, chunks=chunks)
+        self._var("F", ("step",) + space, None, "spring force (tension > 0)", "F*", dtype="f8", **comp)
+        self._var("u", ("step",) + space, None, "spring displacement u = C F (= d - x0 in contact)", "L*",
+                  dtype="f8", **comp)
+        v = self._var("state", ("step",) + space, None, "contact state", "1", dtype="i1", **comp)
+        v.attrs["flag_values"] = np.array([STATE_NEVER, STATE_CONTACT, STATE_RELEASED], dtype=np.int8)
+        v.attrs["flag_meanings"] = "never_in_contact in_contact released"
+
+    # ---- writing -----------------------------------------------------------
+    def _shape(self, a):
+        return a.reshape(self.grid) if self.grid is not None else a
+
+    def _var(self, name, dims, data, long_name, units, dtype=None, **kw):
+        if data is None and "chunks" not in kw:
+            kw["chunks"] = (256,)           # a growing 1-D variable (no heuristic on size 0)
+        v = self._f.create_variable(name, dims, dtype=dtype if data is None else None, data=data, **kw)
+        v.attrs["long_name"] = long_name
+        v.attrs["units"] = units
+        return v
+
+    def observe(self, state, rec) -> None:
+        """Called after every recorded step, with the state that produced ``rec``."""
+        contact = state.contact
+        self._ever |= contact
+        st = self._state
+        st[:] = STATE_NEVER
+        st[self._ever] = STATE_RELEASED
+        st[contact] = STATE_CONTACT
+        if self._prev is not None and rec.n_contact == 0 and self._prev.rec["n_contact"] > 0:
+            self._settle("last_contact", self._prev)
+        if self.every is not None and rec.step % self.every == 0:
+            self._write(_plain(rec), state.F, state.u, st, f"every_{self.every}")
+        if rec.n_snapped > 0 and not self._first_snap_done:
+            self._first_snap_done = True
+            self._write(_plain(rec), state.F, state.u, st, "first_snap")
+        if self._best_load is None or rec.force > self._best_load.rec["force"]:
+            self._best_load = _Copy(rec, state.F, state.u, st)
+        if rec.n_contact > 0 and (self._best_pull is None or rec.force < self._best_pull.rec["force"]):
+            self._best_pull = _Copy(rec, state.F, state.u, st)
+        self._prev = _Copy(rec, state.F, state.u, st)
+
+    def _settle(self, event, snap: _Copy) -> None:
+        self._write(snap.rec, snap.F, snap.u, snap.state, event)
+
+    def _write(self, rec: dict, F, u, state, label: str) -> None:
+        step = rec["step"]
+        label_event = label.split("_")[0] != "every"
+        if label_event:
+            self._events[label] = step
+        if step in self._index:
+            i = self._index[step]
+            self._labels[i] = f"{self._labels[i]},{label}" if self._labels[i] else label
+            self._f.variables["event"][i] = self._labels[i]
+            return
+        f = self._f
+        i = len(self._labels)
+        f.resize_dimension("step", i + 1)
+        v = f.variables
+        v["step"][i] = step
+        v["d"][i] = rec["d"]
+        v["force"][i] = rec["force"]
+        v["n_contact"][i] = rec["n_contact"]
+        v["phase"][i] = rec["phase"]
+        v["event"][i] = label
+        v["F"][i] = self._shape(F)
+        v["u"][i] = self._shape(u)
+        v["state"][i] = self._shape(state)
+        self._index[step] = i
+        self._labels.append(label)
+
+    def close(self, summary: dict | None = None) -> Path:
+        """Write the settled events, the summary, and move the file into place."""
+        if self._best_load is not None:
+            self._settle("max_load", self._best_load)
+        if self._best_pull is not None:
+            self._settle("pull_off", self._best_pull)
+        if "last_contact" not in self._events and self._prev is not None and self._prev.rec["n_contact"] > 0:
+            self._settle("last_contact", self._prev)
+        for event, step in self._events.items():
+            self._f.attrs[f"{event}_step"] = step
+        if summary is not None:
+            self._f.attrs["summary"] = json.dumps(summary, sort_keys=True, default=_json_default)
+        self._f.close()
+        os.replace(self._tmp, self.path)
+        return self.path
+
+    def abort(self) -> None:
+        try:
+            self._f.close()
+        finally:
+            self._tmp.unlink(missing_ok=True)
+
+
+# ---- reading (no xarray needed; xarray users: xr.open_dataset(path)) -------------
+class Fields:
+    """A fields file opened for reading: ``steps`` (sorted), ``snapshot(step)``."""
+
+    def __init__(self, path):
+        import h5netcdf
+
+        self.path = Path(path)
+        with h5netcdf.File(self.path, "r") as f:
+            v = f.variables
+            self.attrs = dict(f.attrs)
+            self.grid = "spring" not in f.dimensions
+            self.x = v["x"][...]
+            self.y = v["y"][...]
+            self.x0 = v["x0"][...]
+            self.f_th = v["f_th"][...]
+            self._steps = np.asarray(v["step"][...], dtype=np.int64)
+            self.d = np.asarray(v["d"][...])
+            self.force = np.asarray(v["force"][...])
+            self.n_contact = np.asarray(v["n_contact"][...])
+            self.events = [e.decode() if isinstance(e, bytes) else str(e) for e in v["event"][...]]
+        self.params = json.loads(self.attrs["params"])
+        self.steps = np.sort(self._steps)
+        self._h5 = None
+
+    def event_step(self, event: str) -> int | None:
+        value = self.attrs.get(f"{event}_step")
+        return None if value is None else int(value)
+
+    def position(self, step: int) -> int:
+        hits = np.flatnonzero(self._steps == step)
+        if not hits.size:
+            raise KeyError(f"{self.path}: no snapshot at step {step}; stored steps: "
+                           f"{', '.join(map(str, self.steps[:20]))}{' ...' if self.steps.size > 20 else ''}")
+        return int(hits[0])
+
+    def snapshot(self, step: int) -> dict:
+        """Arrays F, u, state (grid-shaped on the square grid) and d, force, n_contact, event."""
+        i = self.position(step)
+        if self._h5 is None:
+            import h5py                     # plain h5py reads a slice ~50x faster than h5netcdf
+
+            self._h5 = h5py.File(self.path, "r")
+        out = {name: self._h5[name][i] for name in ("F", "u", "state")}
+        out.update(step=int(step), d=float(self.d[i]), force=float(self.force[i]),
+                   n_contact=int(self.n_contact[i]), event=self.events[i])
+        return out
+
+    def close(self) -> None:
+        if self._h5 is not None:
+            self._h5.close()
+            self._h5 = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,277 @@
+"""Command line views of stored runs: `tfm plot`, `tfm show`, `tfm animate`.
+
+RUN is a curve table (``curve.parquet``, ``results/<campaign>/runs/<id>.parquet``), a
+folder holding one (``results/default``), or a campaign run id (searched under
+``results/*/runs/``). Nothing is re-run: the figures come from the stored curve and the
+stored field snapshots (``<stem>.fields.nc``, see tfm.snapshots).
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import warnings
+from pathlib import Path
+
+EVENT_NAMES = ("pull_off", "max_load", "first_snap", "last_contact")
+
+
+class ViewError(Exception):
+    """A stored run cannot be shown as asked (missing file, step not stored, ...)."""
+
+
+def register(sub) -> None:
+    plot = sub.add_parser("plot", help="redraw the figure of a stored curve",
+                          description="Redraw the force-indentation figure of a stored run.")
+    plot.add_argument("run", help="curve .parquet, a folder with one, or a campaign run id")
+    plot.add_argument("-o", "--output", help="PNG/PDF/SVG path (default: beside the curve, .png)")
+    plot.set_defaults(func=cmd_plot)
+
+    show = sub.add_parser("show", help="contact map of a stored field snapshot",
+                          description="Draw the contact map of one stored snapshot: spring force "
+                                      "(diverging colours, F_th marked), released springs, contact "
+                                      "line, beside the force-indentation curve.")
+    show.add_argument("run", help="curve .parquet, a folder with one, or a campaign run id")
+    show.add_argument("--step", default="pull_off",
+                      help=f"a stored step number, or an event: {', '.join(EVENT_NAMES)} (default pull_off)")
+    show.add_argument("-o", "--output", help="image path (default: <stem>.step<k>.png beside the curve)")
+    show.set_defaults(func=cmd_show)
+
+    anim = sub.add_parser("animate", help="GIF/MP4 of the unloading from stored snapshots",
+                          description="Animate the unloading from the stored field snapshots: the "
+                                      "contact map beside the force-indentation curve, with a marker "
+                                      "on the curve. Needs a run with snapshots = k (every k-th step).")
+    anim.add_argument("run", help="curve .parquet, a folder with one, or a campaign run id")
+    anim.add_argument("-o", "--output", help="a .gif (Pillow) or .mp4 (needs ffmpeg); default <stem>.gif")
+    anim.add_argument("--fps", type=float, default=8.0, help="frames per second (default 8)")
+    anim.add_argument("--all-phases", action="store_true", help="loading too, not only the unloading")
+    anim.set_defaults(func=cmd_animate)
+
+
+# ---- finding and loading a stored run -------------------------------------------------
+def resolve_run(arg: str, results_dir: str | Path = "results") -> Path:
+    p = Path(arg)
+    if p.is_file():
+        return p
+    if p.is_dir():
+        if (p / "curve.parquet").is_file():
+            return p / "curve.parquet"
+        found = sorted(q for q in p.glob("*.parquet") if not q.name.startswith("."))
+        if len(found) == 1:
+            return found[0]
+        raise ViewError(f"{p}: expected one curve table in the folder, found {len(found)}; name the file")
+    if re.fullmatch(r"[0-9a-f]{8,16}", p.name):
+        found = sorted(Path(results_dir).glob(f"*/runs/{p.name}*.parquet"))
+        if len(found) == 1:
+            return found[0]
+        if found:
+            raise ViewError(f"run id {p.name}: several runs match: {', '.join(map(str, found))}")
+    raise ViewError(f"{arg}: no such curve table, folder or run id (under {results_dir}/*/runs/)")
+
+
+def load_run(path: Path):
+    """The curve, the parameter record (None if it cannot be rebuilt) and the fields path."""
+    import pandas as pd
+
+    from .params import ParameterError, Params
+    from .results import fields_path_for, read_metadata
+
+    curve = pd.read_parquet(path)
+    meta = read_metadata(path)
+    try:
+        with warnings.catch_warnings():          # a stored record is complete and was valid
+            warnings.simplefilter("ignore")
+            params = Params.from_dict(meta["params"]) if "params" in meta else None
+    except (ParameterError, TypeError):
+        params = None            # stored by another tfm version: draw without the caption
+    fields = path.parent / meta["fields"] if meta.get("fields") else fields_path_for(path)
+    return curve, params, (fields if fields.exists() else None)
+
+
+def _need_fields(path, fields):
+    if fields is None:
+        raise ViewError(f"{path}: the run stored no field snapshots; rerun it with --snapshots events "
+                        "(or --snapshots K for every K-th step)")
+    from .snapshots import Fields
+
+    return Fields(fields)
+
+
+def pick_step(fields, step: str) -> int:
+    if step in EVENT_NAMES:
+        k = fields.event_step(step)
+        if k is None:
+            raise ViewError(f"{fields.path}: no {step} snapshot stored")
+        return k
+    try:
+        k = int(step)
+    except ValueError:
+        raise ViewError(f"--step: expected a step number or one of {', '.join(EVENT_NAMES)}, got {step!r}") from None
+    if k not in set(fields.steps.tolist()):
+        near = fields.steps[abs(fields.steps - k).argsort()[:5]]
+        raise ViewError(f"--step {k}: not stored; nearest stored steps: {', '.join(map(str, sorted(near)))}")
+    return k
+
+
+# ---- the commands ----------------------------------------------------------------
+def cmd_plot(args) -> int:
+    return _guard(_plot, args)
+
+
+def cmd_show(args) -> int:
+    return _guard(_show, args)
+
+
+def cmd_animate(args) -> int:
+    return _guard(_animate, args)
+
+
+def _guard(fn, args) -> int:
+    try:
+        out = fn(args)
+    except ViewError as exc:
+        print(f"tfm: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}", file=sys.stderr)
+    return 0
+
+
+def _plot(args) -> Path:
+    from .plots import plot_curve
+
+    path = resolve_run(args.run)
+    curve, params, _ = load_run(path)
+    out = Path(args.output) if args.output else path.with_suffix(".png")
+    plot_curve(curve, params, out)
+    return out
+
+
+def _show(args) -> Path:
+    from .plots import plot_contact_map
+
+    path = resolve_run(args.run)
+    curve, params, fpath = load_run(path)
+    fields = _need_fields(path, fpath)
+    k = pick_step(fields, args.step)
+    out = Path(args.output) if args.output else path.with_name(f"{path.stem}.step{k}.png")
+    plot_contact_map(fields, fields.snapshot(k), curve, params, out)
+    return out
+
+
+def _animate(args) -> Path:
+    path = resolve_run(args.run)
+    curve, params, fpath = load_run(path)
+    fields = _need_fields(path, fpath)
+    out = Path(args.output) if args.output else path.with_suffix(".gif")
+    n = animate(fields, curve, params, out, fps=args.fps, unload_only=not args.all_phases)
+    print(f"{n} frames", file=sys.stderr)
+    return out
+
+
+def frame_steps(fields, curve, unload_only: bool = True) -> list[int]:
+    """The stored steps to animate, in order: the unloading ones (with the last loading
+    step as the first frame, when stored), or all."""
+    steps = fields.steps.tolist()
+    if not unload_only:
+        return steps
+    phase = dict(zip(curve["step"].tolist(), curve["phase"].tolist()))
+    unload = [s for s in steps if phase.get(s) == "unload"]
+    load = [s for s in steps if phase.get(s) == "load"]
+    return ([load[-1]] if load else []) + unload
+
+
+def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = True, dpi: int = 110) -> int:
+    """Write a GIF (Pillow) or MP4 (ffmpeg) of the stored snapshots; returns the frame count."""
+    import shutil
+
+    import numpy as np
+    from matplotlib import rc_context
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from . import plots
+
+    out = Path(out)
+    steps = frame_steps(fields, curve, unload_only)
+    if not steps:
+        raise ViewError(f"{fields.path}: no snapshots to animate")
+    if out.suffix.lower() not in (".gif", ".mp4"):
+        raise ViewError(f"-o {out}: the animation is written as .gif or .mp4")
+    if out.suffix.lower() == ".mp4" and shutil.which("ffmpeg") is None:
+        raise ViewError("MP4 needs ffmpeg on the PATH; write a .gif instead (-o anim.gif)")
+    # one colour scale for every frame: the most compressive force shown, and F_th
+    fmin = 0.0
+    for k in steps:
+        snap = fields.snapshot(k)
+        con = np.asarray(snap["state"]) == 1
+        if con.any():
+            fmin = min(fmin, float(np.asarray(snap["F"])[con].min()))
+    vlim = plots.force_limits(float(np.nanmax(fields.f_th)), fmin)
+    frames = []
+    with rc_context(plots.STYLE):
+        fig, (ax_map, ax_curve) = plots.map_figure(params)
+        fig.set_dpi(dpi)
+        canvas = FigureCanvasAgg(fig)
+        marker = plots.draw_curve_marker_panel(ax_curve, curve)
+        head = plots.run_caption(params) + "\n" if params is not None else ""
+        title = fig.suptitle(head, fontsize=8)
+        cmap = None
+        writer = _mp4_writer(fig, out, fps, dpi) if out.suffix.lower() == ".mp4" else None
+        background = None
+        for k in steps:
+            snap = fields.snapshot(k)
+            if cmap is None:
+                cmap = plots.ContactMap(ax_map, fields, snap, vlim=vlim)
+                plots.tidy_ticks(ax_map)
+            else:
+                cmap.update(snap)
+            title.set_text(head + plots.snapshot_title(snap))
+            marker.set_data([-snap["d"]], [snap["force"]])
+            if writer is not None:
+                writer.grab_frame()
+                continue
+            # blitting: the axes, ticks and curves are drawn once; each frame redraws
+            # only what moves (map, contact line, marker, title) over that background
+            moving = cmap.artists() + [marker, title]
+            for artist in moving:
+                artist.set_animated(True)
+            if background is None:
+                canvas.draw()
+                fig.set_layout_engine("none")      # the first frame's layout holds for all
+                background = canvas.copy_from_bbox(fig.bbox)
+            canvas.restore_region(background)
+            for artist in moving:
+                fig.draw_artist(artist)
+            frames.append(_to_palette(canvas))
+        if writer is not None:
+            writer.finish()
+    if frames:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        frames[0].save(out, save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)
+    return len(steps)
+
+
+def _to_palette(canvas):
+    """The drawn frame as a palette image (1 byte per pixel: frames stay small in memory)."""
+    from PIL import Image
+
+    img = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
+    return img.convert("RGB").quantize(colors=128, method=Image.Quantize.MEDIANCUT)
+
+
+def _mp4_writer(fig, out, fps, dpi):
+    from matplotlib.animation import FFMpegWriter
+
+    writer = FFMpegWriter(fps=fps)
+    writer.setup(fig, str(out), dpi=dpi)
+    return writer
+
+
+def main(argv=None) -> int:      # python -m tfm.viewcli plot RUN (same as tfm plot RUN)
+    parser = argparse.ArgumentParser(prog="tfm")
+    register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
