@@ -480,7 +480,9 @@ def test_a_killed_worker_fails_only_its_own_run(tmp_path):
     recorded as failed with the cause, the pool is rebuilt, every other run finishes."""
     psutil = pytest.importorskip("psutil")
     path = tmp_path / "pool.toml"
-    path.write_text('name = "pool"\n[base]\nspacing = "1/64"\nk_th = 0.02\nshape = "paraboloid"\n'
+    # 1/128: a run takes about a second, far longer than a worker needs to take its next
+    # run, so a worker killed a moment after a run finished is mid-run, not idle.
+    path.write_text('name = "pool"\n[base]\nspacing = "1/128"\nk_th = 0.02\nshape = "paraboloid"\n'
                     'max_indent = 0.05\nstep = 2.5e-4\n[sweep]\nalpha = [0.5, 0.6, 0.7, 0.75]\n')
     store = CampaignStore(tmp_path / "pool")
     proc = subprocess.Popen([sys.executable, "-m", "tfm", "campaign", "run", str(path), "--jobs", "2",
@@ -497,6 +499,7 @@ def test_a_killed_worker_fails_only_its_own_run(tmp_path):
                 workers = [c for c in psutil.Process(proc.pid).children()
                            if "spawn_main" in " ".join(c.cmdline())]
                 if len(workers) == 2:
+                    time.sleep(0.2)                               # both past taking a run
                     killed = workers[0].pid
                     os.kill(killed, signal.SIGKILL)
             time.sleep(0.01)
