@@ -289,7 +289,8 @@ _LATER_FIELDS = {f.name: f.default for f in fields(Params)
                                "rolloff", "roughness_seed", "height_map", "map_pixel_size",
                                "height_map_hash", "threshold_disorder", "disorder_width",
                                "disorder_seed", "units", "youngs_modulus", "poisson_ratio",
-                               "work_of_adhesion", "k_th_coefficient")}
+                               "work_of_adhesion", "k_th_coefficient",
+                               "control", "max_load", "load_step", "snapshots")}
 
 
 NOT_HASHED = ("allow",)      # fields that change no number, so not part of the run id
