@@ -9,7 +9,6 @@ The solver knows nothing about files; it returns arrays and flags.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -342,31 +341,3 @@ def _worst_only(over, into, excess_f, excess_u):
         cand = np.flatnonzero(into)
         i[cand[np.argmax(excess_u[cand])]] = True
     return o, i
-
-
-def run_protocol(prob: Problem, delta_max: float, step: float, max_unload_steps: int,
-                 progress=None) -> CurveResult:
-    """Load from d = 0 to d = -delta_max in steps of `step`, then unload until no spring
-    is in contact (or max_unload_steps is reached, which is flagged)."""
-    out = CurveResult()
-    t0 = time.perf_counter()
-    state = ContactState(prob)
-    n_load = int(np.ceil(delta_max / step - 1e-9))
-    k = 0
-    for j in range(1, n_load + 1):
-        d = -min(j * step, delta_max)
-        out.steps.append(state.advance(d, k, "load", out))
-        k += 1
-    out.unload_complete = False
-    for j in range(1, max_unload_steps + 1):
-        d = -delta_max + j * step
-        rec = state.advance(d, k, "unload", out)
-        out.steps.append(rec)
-        k += 1
-        if progress is not None:
-            progress(rec)
-        if rec.n_contact == 0:
-            out.unload_complete = True
-            break
-    out.wall_time = time.perf_counter() - t0
-    return out
