@@ -15,6 +15,7 @@ test-slow:          ## paper-scale regression tests (minutes to hours)
 	$(PYTHON) -m pytest -q -m slow
 
 run:                ## the main job on its embedded default: the paper's Fig. 3 case
+	mkdir -p results/default
 	tfm run --overwrite -o results/default/curve.parquet
 
 bench:              ## ratios against bench/baseline.py, before/after, operators, curves, tree (medians)
