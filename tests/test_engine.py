@@ -80,7 +80,7 @@ def test_unit_response_solves_c_ss_x_equals_one():
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs 2 Numba threads")
 @pytest.mark.parametrize("skip", [False, True])
 def test_compiled_engine_is_bitwise_independent_of_thread_count(skip):
-    """A 301 x 301 grid: the whole-grid transform (P = 640) takes the threaded path."""
+    """A 301 x 301 grid: its transforms (P >= 192) take the threaded path on 2 threads."""
     p = Params.from_dict(dict(STANDARD, spacing="1/128", extent=2.0, max_indent=0.01, step=1e-3))
     prob, layout = build_problem(p)
     prob.skip_solves = skip

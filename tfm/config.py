@@ -20,12 +20,12 @@ STENCIL_RADIUS = 3
 DECISION_SLACK = 10.0
 
 
-# Box size P from which the compiled FFT spreads its fixed chunks over Numba threads.
-# Every parallel stage ends in a barrier; on a loaded machine a barrier waits a scheduler
-# slice (ms). Measured on the shared 2-core VM (omp layer, load ~5): 2 threads took
-# 20 ms a convolution at P = 240 against 0.7 ms on one, and 37 ms against 14 ms at
-# P = 625. So by default only the largest boxes (1/1024 grids) are threaded.
-FFT_THREADED_SIZE = int(os.environ.get("TFM_FFT_THREADED_SIZE", "1024"))
+# Box size P from which the compiled FFT spreads its fixed chunks over the Numba threads
+# (when there are more than one: NUMBA_NUM_THREADS=1 keeps a run on one core, as campaign
+# workers do). One convolution, medians of 200 on the quiet 2-core VM (bench/README.md):
+# P = 192: 0.16 ms on 2 threads vs 0.22 ms on one; P = 480: 1.2 vs 2.4 ms. Under heavy
+# load a barrier can wait a scheduler slice; use NUMBA_NUM_THREADS=1 there.
+FFT_THREADED_SIZE = 192
 
 
 def fft_workers() -> int:

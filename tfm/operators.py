@@ -16,14 +16,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft as sfft
 import numba
-from numba import types
-from numba.typed import Dict
 
 from .config import STENCIL_RADIUS
 from .geometry import Layout
 from .kernels import fft as fftk
 from .kernels.compliance import BOUSSINESQ, LOCAL, NEIGHBORS, cutoff_squared
-from .kernels.contact import PRECOND_DTYPE, box_symbols
+from .kernels.contact import box_symbols, new_symbol_cache
 from .kernels.direct import direct_sum
 from .kernels.grid import index_box, stencil_apply
 from .params import ParameterError, Params
@@ -87,11 +85,10 @@ class FFTOperator:
         self.cut2 = cutoff_squared(spec.kind, spec.cutoff)
         self.diag = np.ascontiguousarray(spec.diag, dtype=float)
         self.all = np.arange(layout.n)
-        self.syms = Dict.empty(key_type=types.int64, value_type=types.float64[:, ::1])
-        self.isyms = Dict.empty(key_type=types.int64, value_type=numba.typeof(np.zeros((1, 1), PRECOND_DTYPE)))
-        if symbol is not None:
-            self.syms[symbol[1]] = np.ascontiguousarray(symbol[0])
-            self.isyms[symbol[1]] = (1.0 / self.syms[symbol[1]]).astype(PRECOND_DTYPE)
+        if symbol is None:
+            self.syms, self.isyms = new_symbol_cache(0, np.ones((1, 1)))
+        else:
+            self.syms, self.isyms = new_symbol_cache(symbol[1], np.ascontiguousarray(symbol[0], dtype=float))
 
     def symbols(self, P: int) -> tuple[np.ndarray, np.ndarray]:
         return box_symbols(self.syms, self.isyms, P, self.cut2, self.spacing, float(self.diag[0]))
@@ -113,7 +110,8 @@ class FFTOperator:
             i0, j0, w, _ = index_box(n, np.concatenate((src, tgt)))
         w = max(w, 1)
         sym = self.symbols(fftk.fast_len(2 * w - 1))[which]
-        return fftk.box_apply(sym, src, np.ascontiguousarray(f_src, dtype=float), tgt, n, i0, j0, w)
+        return fftk.box_apply(sym, src, np.ascontiguousarray(f_src, dtype=float), tgt, n, i0, j0, w,
+                              numba.get_num_threads() > 1)
 
 
 class DirectOperator:

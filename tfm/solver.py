@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from .config import DECISION_SLACK
@@ -169,7 +170,7 @@ class ContactState:
                     self._x0, self._f_th, op.n, op.spacing, op.cut2, op.diag, op.syms, op.isyms,
                     self._pre, self._stencil, self._sym_full, self._src, self._spec, self._out,
                     prob.tol, prob.max_iter, prob.max_rounds, prob.snap_rule == "single",
-                    DECISION_SLACK, stats, fstats)
+                    DECISION_SLACK, stats, fstats, numba.get_num_threads() > 1)
         out.max_residual = float(fstats[F_MAX_RES])
         out.n_solves += int(stats[S_SOLVES])
         out.solver_failures += int(stats[S_FAILURES])
@@ -193,9 +194,10 @@ class ContactState:
         xs = self._slope[idx].copy() if self._slope is not None else np.zeros(idx.size)
         it, conv, res = solve_on_set(idx, ones, xs, ones, False, op.n, op.spacing, op.cut2, op.diag,
                                      op.syms, op.isyms, self._pre, self._stencil, prob.tol,
-                                     prob.max_iter)
+                                     prob.max_iter, numba.get_num_threads() > 1)
         x[idx] = xs
-        field_from_set(idx, xs, op.n, self._sym_full, self._src, self._spec, self._out, w)
+        field_from_set(idx, xs, op.n, self._sym_full, self._src, self._spec, self._out, w,
+                       numba.get_num_threads() > 1)
         return x, w, res * np.sqrt(idx.size), it
 
     def unit_response(self) -> np.ndarray:

@@ -9,7 +9,8 @@ all of them. Dot products are summed in fixed blocks (blocked_dot), the transfor
 fixed chunks (tfm.kernels.fft), so the iterates do not depend on the number of threads.
 """
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.typed import Dict
 
 from ..config import NUMBA_OPTS
 from .fft import convolve, fast_len, symbol
@@ -30,6 +31,24 @@ N_STATS = 8
 F_MAX_RES, F_LAST_RES, F_LAST_BNORM = range(3)
 
 
+SYMBOL_ARRAY = types.float64[:, ::1]
+PRECOND_ARRAY = types.Array(types.float32 if PRECOND_SINGLE else types.float64, 2, "C")
+
+
+@njit(**NUMBA_OPTS)
+def new_symbol_cache(P, sym):
+    """Empty typed dicts P -> symbol and P -> inverse symbol (with ``sym`` at P if P > 0).
+
+    Made in compiled code: filling a typed dict from Python compiles its methods anew in
+    every process (about 1.7 s of a 1/128 run's start-up)."""
+    syms = Dict.empty(key_type=types.int64, value_type=SYMBOL_ARRAY)
+    isyms = Dict.empty(key_type=types.int64, value_type=PRECOND_ARRAY)
+    if P > 0:
+        syms[P] = sym
+        isyms[P] = (1.0 / sym).astype(PRECOND_DTYPE)
+    return syms, isyms
+
+
 @njit(**NUMBA_OPTS)
 def box_symbols(syms, isyms, P, cut2, spacing, diag0):
     """The symbol and its inverse for box size P, cached in the typed dicts."""
@@ -41,23 +60,23 @@ def box_symbols(syms, isyms, P, cut2, spacing, diag0):
 
 
 @njit(**NUMBA_OPTS)
-def _box_apply(sym, idx, vals, n, i0, j0, h, box, spec, out, res):
+def _box_apply(sym, idx, vals, n, i0, j0, h, box, spec, out, res, threaded):
     """res = C_SS vals (or its inverse-symbol twin) for the springs idx of the box."""
     box[:h] = 0.0
     for k in range(idx.size):
         f = idx[k]
         box[f // n - i0, f % n - j0] = vals[k]
-    convolve(box, 0, h, spec, out, sym)
+    convolve(box, 0, h, spec, out, sym, threaded)
     for k in range(idx.size):
         f = idx[k]
         res[k] = out[f // n - i0, f % n - j0]
 
 
 @njit(**NUMBA_OPTS)
-def _precondition(kind, r, z, idx, n, diag, stencil, isym, i0, j0, h, box, spec, out):
+def _precondition(kind, r, z, idx, n, diag, stencil, isym, i0, j0, h, box, spec, out, threaded):
     """z = M r; the FFT inverse runs in the precision of isym and its buffers."""
     if kind == PRE_FFT:
-        _box_apply(isym, idx, r, n, i0, j0, h, box, spec, out, z)
+        _box_apply(isym, idx, r, n, i0, j0, h, box, spec, out, z, threaded)
     elif kind == PRE_DIAGONAL:
         for k in range(idx.size):
             z[k] = r[k] / diag[idx[k]]
@@ -69,7 +88,7 @@ def _precondition(kind, r, z, idx, n, diag, stencil, isym, i0, j0, h, box, spec,
 
 @njit(**NUMBA_OPTS)
 def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, pre, stencil,
-                 tol, max_iter):
+                 tol, max_iter, threaded):
     """PCG for C_SS x = b on the contact set idx (sorted flat indices), from the guess x
     (overwritten), stopping at ||b - C x|| <= tol ||b||. ``Ax0`` = C x when has_Ax0 saves
     the first application. Returns (iterations, converged, relative residual)."""
@@ -97,7 +116,7 @@ def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, p
                 nonzero = True
                 break
         if nonzero:
-            _box_apply(sym, idx, x, n, i0, j0, h, box, spec, out, Ap)
+            _box_apply(sym, idx, x, n, i0, j0, h, box, spec, out, Ap, threaded)
             r = b - Ap
         else:
             r = b.copy()
@@ -105,11 +124,11 @@ def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, p
     if rnorm <= tol * bnorm:
         return 0, True, rnorm / bnorm
     z = np.empty(m)
-    _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout)
+    _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout, threaded)
     p = z.copy()
     rz = blocked_dot(r, z)
     for it in range(1, max_iter + 1):
-        _box_apply(sym, idx, p, n, i0, j0, h, box, spec, out, Ap)
+        _box_apply(sym, idx, p, n, i0, j0, h, box, spec, out, Ap, threaded)
         pAp = blocked_dot(p, Ap)
         if pAp <= 0.0:
             # only possible if C is not positive definite on this set (checked upstream)
@@ -121,7 +140,7 @@ def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, p
         rnorm = np.sqrt(blocked_dot(r, r))
         if rnorm <= tol * bnorm:
             return it, True, rnorm / bnorm
-        _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout)
+        _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout, threaded)
         rz_new = blocked_dot(r, z)
         beta = rz_new / rz
         for k in range(m):
@@ -131,7 +150,7 @@ def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, p
 
 
 @njit(**NUMBA_OPTS)
-def field_from_set(idx, vals, n, sym_full, src, spec, out, u):
+def field_from_set(idx, vals, n, sym_full, src, spec, out, u, threaded):
     """u = C F on the whole n x n grid for forces vals on the springs idx (F = 0 elsewhere).
 
     The box is the grid itself (width n, P = sym_full.shape[0]); only the rows holding
@@ -144,7 +163,7 @@ def field_from_set(idx, vals, n, sym_full, src, spec, out, u):
     src[r0:r1] = 0.0
     for k in range(idx.size):
         src[idx[k] // n, idx[k] % n] = vals[k]
-    convolve(src, r0, r1, spec, out, sym_full)
+    convolve(src, r0, r1, spec, out, sym_full, threaded)
     for i in range(n):
         for j in range(n):
             u[i * n + j] = out[i, j]
@@ -153,7 +172,7 @@ def field_from_set(idx, vals, n, sym_full, src, spec, out, u):
 @njit(**NUMBA_OPTS)
 def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, n, spacing,
                 cut2, diag, syms, isyms, pre, stencil, sym_full, src, spec, out, tol, max_iter,
-                max_rounds, single, slack, stats, fstats):
+                max_rounds, single, slack, stats, fstats, threaded):
     """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
     snap every spring above its threshold and bring in every penetrating one (or only the
     worst, ``single``), until nothing changes or max_rounds is reached.
@@ -162,7 +181,8 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     grid); ``u_guess`` = C guess when has_u_guess. ``solved``: F and u already hold the
     solution on the current set (the first solve is skipped). Counts go to ``stats``;
     ``fstats`` holds the largest relative residual of the solves (updated), then the
-    relative residual and ||b|| of the last solve."""
+    relative residual and ||b|| of the last solve. ``threaded``: spread the large
+    transforms over the Numba threads (tfm.kernels.fft.convolve)."""
     N = n * n
     first = True
     while True:
@@ -179,7 +199,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                 Fc = guess[idx]
                 Ax0 = u_guess[idx] if has_u_guess else b
                 it, conv, res = solve_on_set(idx, b, Fc, Ax0, has_u_guess, n, spacing, cut2, diag,
-                                             syms, isyms, pre, stencil, tol, max_iter)
+                                             syms, isyms, pre, stencil, tol, max_iter, threaded)
                 stats[S_SOLVES] += 1
                 stats[S_ITERS] += it
                 stats[S_LAST_ITERS] = it
@@ -194,7 +214,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                     # an accepted guess needs no new field: u = C guess is already known
                     u[:] = u_guess
                 else:
-                    field_from_set(idx, Fc, n, sym_full, src, spec, out, u)
+                    field_from_set(idx, Fc, n, sym_full, src, spec, out, u, threaded)
         first = False
         has_u_guess = False
         stats[S_ROUNDS] += 1

@@ -106,18 +106,20 @@ def _stages_parallel(src, r0, r1, spec, out, P, sym):
 
 
 @njit(**NUMBA_OPTS)
-def convolve(src, r0, r1, spec, out, sym):
+def convolve(src, r0, r1, spec, out, sym, threaded):
     """out[:W, :W] = (K * src) on a W x W box, src zero outside rows r0:r1.
 
     ``spec`` (W x (P//2 + 1) complex) and ``out`` (W x P) are work buffers. Small boxes
     take whole-array transforms (fewer calls; bench: faster below P ~ 200), large ones the
-    fixed chunks (cache-friendly columns), over threads from THREADED_SIZE. The choice
-    depends on P only, and chunks give the same bits serial or threaded."""
+    fixed chunks (cache-friendly columns), spread over the Numba threads from THREADED_SIZE
+    if ``threaded`` (the caller's numba.get_num_threads() > 1: read in Python, since a
+    jitted call would make the kernels uncacheable). Whether chunks are used depends on P
+    only, and chunks give the same bits serial or threaded."""
     P = sym.shape[0]
     if P >= CHUNKED_SIZE:
         spec[:r0] = 0.0
         spec[r1:] = 0.0
-        if P >= THREADED_SIZE:
+        if threaded and P >= THREADED_SIZE:
             _stages_parallel(src, r0, r1, spec, out, P, sym)
         else:
             _stages_serial(src, r0, r1, spec, out, P, sym)
@@ -132,7 +134,7 @@ def convolve(src, r0, r1, spec, out, sym):
 
 
 @njit(**NUMBA_OPTS)
-def box_apply(sym, src, vals, tgt, n, i0, j0, w):
+def box_apply(sym, src, vals, tgt, n, i0, j0, w, threaded):
     """u at the flat grid indices tgt of C applied to vals at src, on the w x w box at
     (i0, j0) that holds both (P = sym.shape[0] >= 2 w - 1)."""
     P = sym.shape[0]
@@ -149,7 +151,7 @@ def box_apply(sym, src, vals, tgt, n, i0, j0, w):
         return res
     spec = np.empty((w, P // 2 + 1), dtype=np.complex128)
     out = np.empty((w, P))
-    convolve(box, r0, r1, spec, out, sym)
+    convolve(box, r0, r1, spec, out, sym, threaded)
     for k in range(tgt.size):
         res[k] = out[tgt[k] // n - i0, tgt[k] % n - j0]
     return res
