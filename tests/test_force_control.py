@@ -68,3 +68,22 @@ def test_no_spring_in_contact_after_jump_off():
 def test_protocol_parameters_fail_early(values, message):
     with pytest.raises(ParameterError, match=message):
         Params.from_dict(values)
+
+
+@pytest.mark.parametrize("operator", ["fft", "direct"])
+def test_unit_response_solves_are_counted_once_per_contact_set(operator):
+    """Force control's extra solves (C_SS x = 1) appear in n_solves and solver_iters, and a
+    second call on the same contact set reuses the solution."""
+    from tfm.simulate import build_problem
+    from tfm.solver import ContactState, CurveResult
+
+    p = Params.from_dict(dict(STANDARD, spacing="1/32", operator=operator, max_indent=0.02, step=2e-3))
+    prob, _ = build_problem(p)
+    state, out = ContactState(prob), CurveResult()
+    state.advance(-0.01, 0, "load", out)
+    solves, iters = out.n_solves, out.solver_iters
+    x = state.unit_response(out)
+    assert out.n_solves == solves + 1 and out.solver_iters > iters
+    assert np.all(x[state.contact] > 0) and np.all(x[~state.contact] == 0)
+    again = state.unit_response(out)
+    assert out.n_solves == solves + 1 and np.array_equal(x, again)

@@ -136,7 +136,9 @@ def _hold(state: ContactState, target: float, d: float, first_step: float, k: in
                 break
             d_new = d - first_step          # bring the flat down to the first contact
         else:
-            slope = float(state.unit_response().sum())    # d(sum F)/dd > 0 on the set
+            before = out.solver_iters
+            slope = float(state.unit_response(out).sum())  # d(sum F)/dd > 0 on the set
+            iters += out.solver_iters - before
             d_new = d + (-float(state.F.sum()) - target) / slope
         rec = state.advance(d_new, k, phase, out)
         d = d_new

@@ -200,25 +200,33 @@ class ContactState:
                        numba.get_num_threads() > 1)
         return x, w, res * np.sqrt(idx.size), it
 
-    def unit_response(self) -> np.ndarray:
+    def unit_response(self, out: CurveResult | None = None) -> np.ndarray:
         """dF/dd on the current contact set: the full-grid solution of C_SS x = 1 on the
-        set, zero off it (F is linear in d while the set is fixed: F(d) = F(d0) + (d - d0) x)."""
+        set, zero off it (F is linear in d while the set is fixed: F(d) = F(d0) + (d - d0) x).
+        A new solve is counted in ``out`` (n_solves, solver_iters) when given."""
         if self._unit is None or self._unit_set != self._set_id:
-            if not self._compiled:
-                return self._unit_python()
-            self._unit = self._solve_unit()
+            if self._compiled:
+                self._unit = self._solve_unit()
+            else:
+                self._unit = self._unit_python()
             self._unit_set = self._set_id
+            if out is not None and self.contact.any():
+                out.n_solves += 1
+                out.solver_iters += self._unit[3]
         return self._unit[0].copy()
 
     def _unit_python(self):
+        """As _solve_unit, on the Python path (the field is not needed there)."""
         prob, op = self.prob, self.prob.operator
         idx = np.flatnonzero(self.contact)
         x = np.zeros(self.F.size)
+        iters = 0
         if idx.size:
             precond = None if prob.precond is None else (lambda r: prob.precond(idx, r))
-            x[idx] = pcg(lambda v: op.apply(idx, v, idx), np.ones(idx.size), np.zeros(idx.size),
-                         precond, prob.tol, prob.max_iter)[0]
-        return x
+            x[idx], stats = pcg(lambda v: op.apply(idx, v, idx), np.ones(idx.size), np.zeros(idx.size),
+                                precond, prob.tol, prob.max_iter)
+            iters = stats.iters
+        return x, None, None, iters
 
     def _predict(self, d):
         """F and u at d from the base solution and the unit response of the unchanged set,
