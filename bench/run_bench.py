@@ -71,6 +71,24 @@ def operator_table(sizes=(128, 256, 512), direct_max=256, repeats=5):
     return rows
 
 
+def fft_table(widths=(64, 96, 128, 160, 240, 320, 480), repeats=200):
+    """One compiled convolution of a full w x w box (P = fast_len(2w - 1)): median ms on one
+    thread and spread over the Numba threads, the choice tfm.kernels.fft.convolve makes."""
+    from tfm.kernels.fft import _stages_parallel, _stages_serial, fast_len, symbol
+    rows = []
+    for w in widths:
+        P = fast_len(2 * w - 1)
+        sym = symbol(1e300, 1.0 / 512, 3.8, P)
+        src = np.random.default_rng(0).random((w, w))
+        spec = np.zeros((w, P // 2 + 1), dtype=complex)
+        out = np.empty((w, P))
+        times = []
+        for stages in (_stages_serial, _stages_parallel):
+            times.append(1e3 * median_time(lambda: stages(src, 0, w, spec, out, P, sym), repeats))
+        rows.append((w, P, times[0], times[1]))
+    return rows
+
+
 def curve_table(spacings=("1/64", "1/128", "1/256"), repeats=3):
     """The issue's curve: paraboloid R = 1, alpha 0.75, k_th 0.02, max_indent 0.05, step 2.5e-4."""
     from tfm import Params, simulate
@@ -201,7 +219,7 @@ def scale_table(spacings=("1/64", "1/128", "1/256", "1/512", "1/1024")):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="smaller sizes and fewer repeats")
-    ap.add_argument("--only", choices=["ratios", "old", "operators", "curves", "tree"], default=None)
+    ap.add_argument("--only", choices=["ratios", "old", "fft", "operators", "curves", "tree"], default=None)
     ap.add_argument("--scale", action="store_true",
                     help="only the scaling table 1/64 ... 1/1024 (one subprocess per spacing)")
     ap.add_argument("--max-spacing", default="1/1024", help="--scale: finest spacing")
@@ -231,6 +249,15 @@ def main(argv=None):
         print("|---|---|---|---|")
         for sp, o, t, ratio in old_engine_table(repeats=args.repeats):
             print(f"| {sp} | {o:.2f} | {t:.2f} | {ratio:.1f}x |")
+        print()
+    if args.only in (None, "fft"):
+        import numba
+        print(f"## One compiled convolution: one thread against {numba.get_num_threads()} "
+              "(median ms; threaded from P = 192)\n")
+        print("| box w | P | 1 thread | threaded | ratio |")
+        print("|---|---|---|---|---|")
+        for w, P, t1, tn in fft_table(repeats=50 if args.quick else 200):
+            print(f"| {w} | {P} | {t1:.3f} | {tn:.3f} | {t1 / tn:.2f}x |")
         print()
     if args.only in (None, "operators"):
         sizes = (64, 128) if args.quick else (128, 256, 512)

@@ -18,7 +18,7 @@ from .grid import blocked_dot, index_box, stencil_apply
 
 # The FFT preconditioner in single precision (off: at 1/128 it cost 5 % more CG iterations
 # and saved no measurable time on the shared 2-core machine). Only the
-# preconditioner: residuals, operator and iterates stay double (bench/README).
+# preconditioner: residuals, operator and iterates stay double.
 PRECOND_SINGLE = False
 PRECOND_DTYPE = np.float32 if PRECOND_SINGLE else np.float64
 PRECOND_CDTYPE = np.complex64 if PRECOND_SINGLE else np.complex128
