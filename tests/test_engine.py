@@ -90,6 +90,7 @@ def test_compiled_engine_is_bitwise_independent_of_thread_count(skip):
         for nt in (1, 2):
             numba.set_num_threads(nt)
             state, out = ContactState(prob), CurveResult()
+            state.threaded = nt > 1      # the threaded path even where it would not pay
             recs = [state.advance(-0.001 * (k + 1), k, "load", out) for k in range(4)]
             runs.append((state.F.copy(), state.u.copy(), [r.force for r in recs]))
     finally:
@@ -105,3 +106,17 @@ def test_pull_off_at_1_512_is_converged_in_the_tolerance():
     b = simulate(p.replace(tol=1e-12)).summary["pull_off_force"]
     # decisions carry a slack of 10 tol; at tol 1e-10 the pull-off must not move by 1e-5
     assert a == pytest.approx(b, rel=1e-5)
+
+
+def test_threads_are_used_only_where_they_can_pay():
+    """One thread, or a box below THREADED_SIZE: never threaded, without timing anything.
+    Otherwise the choice is a timing (machine-dependent), so only its type is checked; the
+    bits do not depend on it (test above)."""
+    from tfm.kernels.fft import THREADED_SIZE, fast_len, symbol, threads_pay
+
+    small = symbol(1e300, 1 / 64, 3.8, fast_len(2 * 40 - 1))
+    large = symbol(1e300, 1 / 64, 3.8, fast_len(2 * 100 - 1))
+    assert small.shape[0] < THREADED_SIZE <= large.shape[0]
+    assert threads_pay(40, small, 2) is False
+    assert threads_pay(100, large, 1) is False
+    assert isinstance(threads_pay(100, large, 2), bool)

@@ -19,7 +19,7 @@ from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, PRE_
                               PRE_NONE, PRE_STENCIL, S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS,
                               S_ROUNDS, S_SNAPPED, S_SOLVES, field_from_set, snap_rounds,
                               solve_on_set)
-from .kernels.fft import fast_len
+from .kernels.fft import fast_len, threads_pay
 from .kernels.grid import blocked_dot
 
 
@@ -152,6 +152,8 @@ class ContactState:
         self._src = np.zeros((n, n))
         self._spec = np.zeros((n, P // 2 + 1), dtype=np.complex128)
         self._out = np.empty((n, P))
+        # threads only where they pay on this machine now (same bits either way)
+        self.threaded = threads_pay(n, self._sym_full, numba.get_num_threads())
         pre = prob.precond
         name = getattr(pre, "name", "none") if pre is not None else "none"
         self._pre = {"none": PRE_NONE, "diagonal": PRE_DIAGONAL, "fft": PRE_FFT,
@@ -170,7 +172,7 @@ class ContactState:
                     self._x0, self._f_th, op.n, op.spacing, op.cut2, op.diag, op.syms, op.isyms,
                     self._pre, self._stencil, self._sym_full, self._src, self._spec, self._out,
                     prob.tol, prob.max_iter, prob.max_rounds, prob.snap_rule == "single",
-                    DECISION_SLACK, stats, fstats, numba.get_num_threads() > 1)
+                    DECISION_SLACK, stats, fstats, self.threaded)
         out.max_residual = float(fstats[F_MAX_RES])
         out.n_solves += int(stats[S_SOLVES])
         out.solver_failures += int(stats[S_FAILURES])
@@ -194,10 +196,10 @@ class ContactState:
         xs = self._slope[idx].copy() if self._slope is not None else np.zeros(idx.size)
         it, conv, res = solve_on_set(idx, ones, xs, ones, False, op.n, op.spacing, op.cut2, op.diag,
                                      op.syms, op.isyms, self._pre, self._stencil, prob.tol,
-                                     prob.max_iter, numba.get_num_threads() > 1)
+                                     prob.max_iter, self.threaded)
         x[idx] = xs
         field_from_set(idx, xs, op.n, self._sym_full, self._src, self._spec, self._out, w,
-                       numba.get_num_threads() > 1)
+                       self.threaded)
         return x, w, res * np.sqrt(idx.size), it
 
     def unit_response(self, out: CurveResult | None = None) -> np.ndarray:

@@ -10,6 +10,8 @@ chunk is one single-threaded pocketfft call. Which thread runs a chunk changes n
 so the result is bitwise the same for any thread count (pocketfft's own workers= would
 regroup the transforms into SIMD bundles by thread, which changes the last bits).
 """
+import time
+
 import numpy as np
 import rocket_fft  # noqa: F401  (registers scipy.fft for Numba)
 import scipy.fft as sfft
@@ -103,6 +105,29 @@ def _stages_parallel(src, r0, r1, spec, out, P, sym):
         _columns(spec, W, sym, c)
     for c in prange((W + CHUNK - 1) // CHUNK):
         _rows_inverse(spec, out, P, c)
+
+
+def threads_pay(w, sym, threads, repeats=5):
+    """Whether spreading the chunks over ``threads`` Numba threads is faster, timed now on
+    a w x w box with the symbol ``sym`` (5 calls each, a few ms). The bits are the same either way, so
+    the choice is free; it matters on a busy machine, where a barrier can wait a scheduler
+    slice (`python -m bench.run_bench --only fft` with two other jobs running: one
+    convolution at P = 480 took 24 ms threaded against 2.4 ms on one thread)."""
+    P = sym.shape[0]
+    if threads < 2 or P < THREADED_SIZE:
+        return False
+    src = np.random.default_rng(0).random((w, w))
+    spec = np.zeros((w, P // 2 + 1), dtype=np.complex128)
+    out = np.empty((w, P))
+    times = {_stages_serial: [], _stages_parallel: []}
+    for k in range(repeats + 1):          # round 0 warms up the thread pool
+        for stages, kept in times.items():
+            t = time.perf_counter()
+            stages(src, 0, w, spec, out, P, sym)
+            if k:
+                kept.append(time.perf_counter() - t)
+    # medians: a lucky threaded call must not hide the barriers' waits under load
+    return float(np.median(times[_stages_parallel])) < 0.9 * float(np.median(times[_stages_serial]))
 
 
 @njit(**NUMBA_OPTS)
