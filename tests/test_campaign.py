@@ -516,6 +516,40 @@ def test_a_killed_worker_fails_only_its_own_run(tmp_path):
     assert tfm_main(["campaign", "status", str(path), "--results-dir", str(tmp_path)]) == 1
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux only")
+def test_killing_the_campaign_stops_its_workers(tmp_path):
+    """SIGTERM to `tfm campaign run --jobs 2` while both workers compute: the workers stop
+    with it (before: they computed on as orphans until their run ended)."""
+    psutil = pytest.importorskip("psutil")
+    path = tmp_path / "orphans.toml"
+    # 1/256 runs take seconds each, so a worker still alive 3 s after its parent died
+    # would be one computing on as an orphan
+    path.write_text('name = "orphans"\n[base]\nspacing = "1/256"\nk_th = 0.02\nshape = "paraboloid"\n'
+                    'max_indent = 0.05\nstep = 2.5e-4\n[sweep]\nalpha = [0.5, 0.6]\n')
+    proc = subprocess.Popen([sys.executable, "-m", "tfm", "campaign", "run", str(path), "--jobs", "2",
+                             "--results-dir", str(tmp_path), "--quiet"],
+                            cwd=REPO, env={**os.environ, "CI": "true", "PYTHONPATH": str(REPO)},
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 180
+    try:
+        while True:                      # until both workers have computed for a while
+            assert proc.poll() is None and time.monotonic() < deadline
+            workers = [c for c in psutil.Process(proc.pid).children()
+                       if "spawn_main" in " ".join(c.cmdline())]
+            if len(workers) == 2 and all(w.cpu_times().user > 1.0 for w in workers):
+                break
+            time.sleep(0.05)
+        proc.terminate()
+        proc.wait(timeout=30)
+        gone, alive = psutil.wait_procs(workers, timeout=3)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    for w in alive:
+        w.kill()
+    assert not alive, f"{len(alive)} workers outlived the campaign"
+
+
 def test_the_pool_blames_the_run_whose_worker_died_and_finishes_the_rest():
     """In process: one run kills its own worker mid-run; it fails with the cause, the
     others (in flight on the other worker, or not yet started) finish in a rebuilt pool."""

@@ -188,7 +188,25 @@ _STARTED = None          # in a pool worker: the queue on which it says what it 
 def _pool_init(threads: int, started=None) -> None:
     global _STARTED
     _STARTED = started
+    _die_with_parent()
     _set_threads(threads)
+
+
+def _die_with_parent() -> None:
+    """Linux: this worker gets SIGTERM when the campaign process dies (SIGTERM, SIGKILL, a
+    crash), instead of computing on as an orphan whose result nobody will store. Its run
+    is then simply pending, and the next `tfm campaign run` resumes it."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() == 1:              # the parent died before prctl took effect
+        os._exit(1)
 
 
 def _pool_execute(run_id: str, params, executor: str) -> Outcome:
