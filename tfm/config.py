@@ -24,8 +24,8 @@ DECISION_SLACK = 10.0
 # (when there are more than one: NUMBA_NUM_THREADS=1 keeps a run on one core, as campaign
 # workers do). One convolution, medians of 200 on the quiet 2-core VM (`python -m
 # bench.run_bench --only fft`): P = 192, 0.23 ms on 2 threads vs 0.31 ms on one; P = 480,
-# 1.26 vs 2.45 ms. Under heavy load a barrier can wait a scheduler slice: use
-# NUMBA_NUM_THREADS=1 there.
+# 1.26 vs 2.45 ms. Under heavy load a barrier can wait a scheduler slice, so a run also
+# times both ways at start (tfm.kernels.fft.threads_pay) and keeps the faster.
 FFT_THREADED_SIZE = 192
 
 

@@ -85,6 +85,7 @@ class FFTOperator:
         self.cut2 = cutoff_squared(spec.kind, spec.cutoff)
         self.diag = np.ascontiguousarray(spec.diag, dtype=float)
         self.all = np.arange(layout.n)
+        self._threads_pay = None
         if symbol is None:
             self.syms, self.isyms = new_symbol_cache(0, np.ones((1, 1)))
         else:
@@ -92,6 +93,14 @@ class FFTOperator:
 
     def symbols(self, P: int) -> tuple[np.ndarray, np.ndarray]:
         return box_symbols(self.syms, self.isyms, P, self.cut2, self.spacing, float(self.diag[0]))
+
+    def threaded(self) -> bool:
+        """Whether transforms of this grid's size run faster over the Numba threads, timed
+        once (tfm.kernels.fft.threads_pay); the bits are the same either way."""
+        if self._threads_pay is None:
+            sym = self.symbols(fftk.fast_len(2 * self.n - 1))[0]
+            self._threads_pay = fftk.threads_pay(self.n, sym, numba.get_num_threads())
+        return self._threads_pay
 
     def apply_inverse(self, src, f_src, tgt=None):
         """C^-1 on the box of src and tgt (the FFT preconditioner): same transforms."""
@@ -111,7 +120,7 @@ class FFTOperator:
         w = max(w, 1)
         sym = self.symbols(fftk.fast_len(2 * w - 1))[which]
         return fftk.box_apply(sym, src, np.ascontiguousarray(f_src, dtype=float), tgt, n, i0, j0, w,
-                              numba.get_num_threads() > 1)
+                              self.threaded())
 
 
 class DirectOperator:

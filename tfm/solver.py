@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from .config import DECISION_SLACK
@@ -19,7 +18,7 @@ from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, PRE_
                               PRE_NONE, PRE_STENCIL, S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS,
                               S_ROUNDS, S_SNAPPED, S_SOLVES, field_from_set, snap_rounds,
                               solve_on_set)
-from .kernels.fft import fast_len, threads_pay
+from .kernels.fft import fast_len
 from .kernels.grid import blocked_dot
 
 
@@ -153,7 +152,7 @@ class ContactState:
         self._spec = np.zeros((n, P // 2 + 1), dtype=np.complex128)
         self._out = np.empty((n, P))
         # threads only where they pay on this machine now (same bits either way)
-        self.threaded = threads_pay(n, self._sym_full, numba.get_num_threads())
+        self.threaded = op.threaded()
         pre = prob.precond
         name = getattr(pre, "name", "none") if pre is not None else "none"
         self._pre = {"none": PRE_NONE, "diagonal": PRE_DIAGONAL, "fft": PRE_FFT,

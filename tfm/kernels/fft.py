@@ -109,8 +109,8 @@ def _stages_parallel(src, r0, r1, spec, out, P, sym):
 
 def threads_pay(w, sym, threads, repeats=5):
     """Whether spreading the chunks over ``threads`` Numba threads is faster, timed now on
-    a w x w box with the symbol ``sym`` (5 calls each, a few ms). The bits are the same either way, so
-    the choice is free; it matters on a busy machine, where a barrier can wait a scheduler
+    a w x w box with the symbol ``sym`` (``repeats`` calls each way, a few ms). The bits
+    are the same either way, so the choice is free; it matters on a busy machine, where a barrier can wait a scheduler
     slice (`python -m bench.run_bench --only fft` with two other jobs running: one
     convolution at P = 480 took 24 ms threaded against 2.4 ms on one thread)."""
     P = sym.shape[0]
@@ -137,9 +137,9 @@ def convolve(src, r0, r1, spec, out, sym, threaded):
     ``spec`` (W x (P//2 + 1) complex) and ``out`` (W x P) are work buffers. Small boxes
     take whole-array transforms (fewer calls; bench: faster below P ~ 200), large ones the
     fixed chunks (cache-friendly columns), spread over the Numba threads from THREADED_SIZE
-    if ``threaded`` (the caller's numba.get_num_threads() > 1: read in Python, since a
-    jitted call would make the kernels uncacheable). Whether chunks are used depends on P
-    only, and chunks give the same bits serial or threaded."""
+    if ``threaded`` (decided in Python by threads_pay: a thread count read in jitted code
+    would make the kernels uncacheable). Whether chunks are used depends on P only, and
+    chunks give the same bits serial or threaded."""
     P = sym.shape[0]
     if P >= CHUNKED_SIZE:
         spec[:r0] = 0.0
