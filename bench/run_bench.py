@@ -165,6 +165,32 @@ def ratio_table(repeats=3, with_256_baseline=True):
     return rows
 
 
+def rounds_table(spacings=("1/256", "1/512"), repeats=3):
+    """Before/after of the decision-only rounds (tfm.kernels.contact.snap_rounds): every
+    round solved to tol (round_tol = tol) against the default, in-process, interleaved."""
+    from tfm import Params, simulate
+    from tfm.protocol import run
+    from tfm.simulate import build_problem
+    rows = []
+    simulate(Params.from_dict(dict(STANDARD, spacing="1/16")))
+    for sp in spacings:
+        p = Params.from_dict(dict(STANDARD, spacing=sp))
+        times = {True: [], False: []}
+        iters = {}
+        for _ in range(repeats):
+            for loose in (False, True):
+                prob, _ = build_problem(p)
+                if not loose:
+                    prob.round_tol = prob.tol
+                t = time.perf_counter()
+                out = run(p, prob)
+                times[loose].append(time.perf_counter() - t)
+                iters[loose] = out.solver_iters
+        a, b = statistics.median(times[False]), statistics.median(times[True])
+        rows.append((sp, a, iters[False], b, iters[True], a / b))
+    return rows
+
+
 def old_engine_table(spacings=("1/128", "1/256"), repeats=3):
     """Before/after in one run: the old Python engine (tests/reference_engine.py, the code
     of main before the compiled engine) against tfm.simulate, interleaved."""
@@ -219,7 +245,7 @@ def scale_table(spacings=("1/64", "1/128", "1/256", "1/512", "1/1024")):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--quick", action="store_true", help="smaller sizes and fewer repeats")
-    ap.add_argument("--only", choices=["ratios", "old", "fft", "operators", "curves", "tree"], default=None)
+    ap.add_argument("--only", choices=["ratios", "old", "rounds", "fft", "operators", "curves", "tree"], default=None)
     ap.add_argument("--scale", action="store_true",
                     help="only the scaling table 1/64 ... 1/1024 (one subprocess per spacing)")
     ap.add_argument("--max-spacing", default="1/1024", help="--scale: finest spacing")
@@ -249,6 +275,15 @@ def main(argv=None):
         print("|---|---|---|---|")
         for sp, o, t, ratio in old_engine_table(repeats=args.repeats):
             print(f"| {sp} | {o:.2f} | {t:.2f} | {ratio:.1f}x |")
+        print()
+    if args.only in (None, "rounds"):
+        print("## Decision-only rounds at round_tol against every round at tol, in-process, "
+              "interleaved, medians\n")
+        print("| spacing | all at tol s | CG iterations | loose rounds s | CG iterations | speed-up |")
+        print("|---|---|---|---|---|---|")
+        for sp, a, ia, b, ib, ratio in rounds_table(("1/128", "1/256") if args.quick else ("1/256", "1/512"),
+                                                    repeats=args.repeats):
+            print(f"| {sp} | {a:.2f} | {ia} | {b:.2f} | {ib} | {ratio:.2f}x |")
         print()
     if args.only in (None, "fft"):
         import numba

@@ -14,6 +14,7 @@ from reference_engine import reference_curve
 from tfm import Params, simulate
 from tfm.geometry import heights, make_layout
 from tfm.operators import kernel_spec
+from tfm.protocol import run
 from tfm.simulate import build_problem
 from tfm.solver import ContactState, CurveResult
 
@@ -120,3 +121,39 @@ def test_threads_are_used_only_where_they_can_pay():
     assert threads_pay(40, small, 2) is False
     assert threads_pay(100, large, 1) is False
     assert isinstance(threads_pay(100, large, 2), bool)
+
+
+def test_loose_decision_rounds_rest_on_rigorous_bounds():
+    """snap_rounds accepts a loose round only inside bounds built from lam_lo (<= the
+    smallest eigenvalue of every C_SS) and row_norm (>= every row's 2-norm of C): both
+    checked against the dense C at 1/32, on the whole grid and on a contact-like disc."""
+    p = Params.from_dict(dict(STANDARD, spacing="1/32", max_indent=0.02))
+    prob, layout = build_problem(p)
+    state = ContactState(prob)
+    C = dense_compliance(layout, kernel_spec(p, layout))
+    assert state._row_norm >= np.sqrt((C ** 2).sum(axis=1)).max()
+    disc = np.flatnonzero(np.hypot(layout.x, layout.y) < 0.3)
+    for idx in (np.arange(C.shape[0]), disc):
+        assert 0 < state._lam_lo <= np.linalg.eigvalsh(C[np.ix_(idx, idx)]).min()
+
+
+@pytest.mark.parametrize("spacing", ["1/64", "1/128"])
+def test_loose_decision_rounds_change_no_decision(spacing):
+    """The standard curve with decision-only rounds solved to round_tol and with every
+    round solved to tol: the same contact count at every step, and forces within what the
+    two tol-solves can differ by (tol 1e-10 relative on ||b||, condition ~10^2: 1e-7 of the
+    largest force leaves margin). The loose path must actually have been taken."""
+    p = Params.from_dict(dict(STANDARD, spacing=spacing))
+    runs = []
+    for loose in (True, False):
+        prob, _ = build_problem(p)
+        if not loose:
+            prob.round_tol = prob.tol
+        runs.append(run(p, prob))
+    a, b = runs
+    assert a.refines > 0 and b.refines == 0
+    assert a.solver_iters < b.solver_iters
+    assert [s.n_contact for s in a.steps] == [s.n_contact for s in b.steps]
+    fa = np.array([s.force for s in a.steps])
+    fb = np.array([s.force for s in b.steps])
+    assert np.allclose(fa, fb, rtol=0, atol=1e-7 * np.abs(fb).max())

@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import DECISION_SLACK
+from .config import DECISION_SLACK, ROUND_TOL
 from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, PRE_DIAGONAL, PRE_FFT,
                               PRE_NONE, PRE_STENCIL, S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS,
-                              S_ROUNDS, S_SNAPPED, S_SOLVES, field_from_set, snap_rounds,
+                              S_REFINES, S_ROUNDS, S_SNAPPED, S_SOLVES, field_from_set, snap_rounds,
                               solve_on_set)
 from .kernels.fft import fast_len
 from .kernels.grid import blocked_dot
@@ -82,6 +82,7 @@ class Problem:
     max_rounds: int
     snap_rule: str          # "batch" (paper) or "single"
     skip_solves: bool = False  # predict F on an unchanged set (bench: no gain at 1/128)
+    round_tol: float = ROUND_TOL  # decision-only rounds (compiled path; <= tol: off)
 
 
 @dataclass
@@ -106,6 +107,7 @@ class CurveResult:
     max_residual: float = 0.0
     solver_failures: int = 0
     rounds_exceeded: int = 0
+    refines: int = 0             # loose decision solves carried on to tol (compiled path)
     edge_steps: int = 0
     unload_complete: bool = True
     wall_time: float = 0.0
@@ -147,6 +149,12 @@ class ContactState:
         n = op.n
         P = fast_len(2 * n - 1)
         self._sym_full = op.symbols(P)[0]
+        # Bounds for the loose decision rounds (snap_rounds): every C_SS is a principal
+        # submatrix of the P-periodic circulant whose eigenvalues are the symbol, so its
+        # smallest eigenvalue is at least min(symbol), and each row of C is part of a row
+        # of the circulant, whose 2-norm is that of the kernel on the periodic box.
+        self._lam_lo = float(self._sym_full.min())
+        self._row_norm = float(np.sqrt(np.sum(np.fft.irfft2(self._sym_full, s=(P, P)) ** 2)))
         # work buffers of the whole-grid field u = C F (reused every solve)
         self._src = np.zeros((n, n))
         self._spec = np.zeros((n, P // 2 + 1), dtype=np.complex128)
@@ -171,11 +179,13 @@ class ContactState:
                     self._x0, self._f_th, op.n, op.spacing, op.cut2, op.diag, op.syms, op.isyms,
                     self._pre, self._stencil, self._sym_full, self._src, self._spec, self._out,
                     prob.tol, prob.max_iter, prob.max_rounds, prob.snap_rule == "single",
-                    DECISION_SLACK, stats, fstats, self.threaded)
+                    DECISION_SLACK, prob.round_tol, self._lam_lo, self._row_norm, stats, fstats,
+                    self.threaded)
         out.max_residual = float(fstats[F_MAX_RES])
         out.n_solves += int(stats[S_SOLVES])
         out.solver_failures += int(stats[S_FAILURES])
         out.rounds_exceeded += int(stats[S_EXCEEDED])
+        out.refines += int(stats[S_REFINES])
         if stats[S_SOLVES] > 0:
             # the step ended on a real solve: the base of later predictions on this set
             self._base = (self.F.copy(), self.u.copy(), float(d),

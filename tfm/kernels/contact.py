@@ -7,6 +7,9 @@ of S, its FFT size P, the symbol and the inverse symbol (the preconditioner, R C
 the same box) and the work buffers are set up before the first CG iteration and shared by
 all of them. Dot products are summed in fixed blocks (blocked_dot), the transforms in
 fixed chunks (tfm.kernels.fft), so the iterates do not depend on the number of threads.
+
+A round whose solve only decides which springs change is solved to config.ROUND_TOL, not
+tol, when a rigorous bound shows a tol-solve would decide the same (snap_rounds).
 """
 import numpy as np
 from numba import njit, types
@@ -25,8 +28,9 @@ PRECOND_CDTYPE = np.complex64 if PRECOND_SINGLE else np.complex128
 # preconditioner codes
 PRE_NONE, PRE_DIAGONAL, PRE_FFT, PRE_STENCIL = 0, 1, 2, 3
 # slots of the integer statistics array
-S_SOLVES, S_ITERS, S_FAILURES, S_ROUNDS, S_SNAPPED, S_ENTERED, S_EXCEEDED, S_LAST_ITERS = range(8)
-N_STATS = 8
+(S_SOLVES, S_ITERS, S_FAILURES, S_ROUNDS, S_SNAPPED, S_ENTERED, S_EXCEEDED, S_LAST_ITERS,
+ S_REFINES) = range(9)
+N_STATS = 9
 # slots of the float statistics array
 F_MAX_RES, F_LAST_RES, F_LAST_BNORM = range(3)
 
@@ -170,24 +174,85 @@ def field_from_set(idx, vals, n, sym_full, src, spec, out, u, threaded):
 
 
 @njit(**NUMBA_OPTS)
+def _slacks(d, contact, F, u, rel):
+    """Decisions ignore violations at the level of the solve's own error: rel times the
+    largest contact force, and rel times the largest of |d| and |u|."""
+    scale_f = 0.0
+    scale_u = abs(d)
+    for i in range(contact.size):
+        if contact[i]:
+            scale_f = max(scale_f, abs(F[i]))
+        scale_u = max(scale_u, abs(u[i]))
+    return rel * scale_f, rel * scale_u
+
+
+@njit(**NUMBA_OPTS)
+def _classify(d, contact, F, u, x0, f_th, slack_f, slack_u, bf, bu, marks):
+    """marks[i] = 1 if spring i snaps, 2 if it enters, 0 if it stays (Algorithm 1's rules,
+    violations below the slack ignored). With bounds bf, bu > 0 on the distance to the
+    tolerance-tol solution (forces, displacements), also counts the springs whose fate that
+    distance could change. Returns (snapping, entering, unsure, worst snap, worst entry)."""
+    n_over = 0
+    n_into = 0
+    unsure = 0
+    worst_over = -1
+    worst_into = -1
+    for i in range(contact.size):
+        marks[i] = 0
+        if contact[i]:
+            g = F[i] - (f_th[i] + slack_f)
+            if g > 0.0:
+                marks[i] = 1
+                n_over += 1
+                if worst_over < 0 or F[i] - f_th[i] > F[worst_over] - f_th[worst_over]:
+                    worst_over = i
+            if abs(g) <= bf:
+                unsure += 1
+        else:
+            g = x0[i] + u[i] - (d + slack_u)
+            if g > 0.0:
+                marks[i] = 2
+                n_into += 1
+                if worst_into < 0 or x0[i] + u[i] > x0[worst_into] + u[worst_into]:
+                    worst_into = i
+            if abs(g) <= bu:
+                unsure += 1
+    return n_over, n_into, unsure, worst_over, worst_into
+
+
+@njit(**NUMBA_OPTS)
 def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, n, spacing,
                 cut2, diag, syms, isyms, pre, stencil, sym_full, src, spec, out, tol, max_iter,
-                max_rounds, single, slack, stats, fstats, threaded):
+                max_rounds, single, slack, round_tol, lam_lo, row_norm, stats, fstats, threaded):
     """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
     snap every spring above its threshold and bring in every penetrating one (or only the
     worst, ``single``), until nothing changes or max_rounds is reached.
 
+    A round whose only use is to decide which springs change is solved to ``round_tol``
+    (> tol) only: ||F - F_tol|| <= (||r|| + tol ||b||) / lam_lo for any two solutions with
+    residuals r and tol ||b|| (lam_lo <= the smallest eigenvalue of every C_SS), and
+    |u_i - u_tol,i| <= row_norm times that (row_norm >= every row's 2-norm of C). A round
+    is accepted loose only if no spring lies within those bounds of its decision line, so
+    the sequence of contact sets is the one tol-solves give; the last round of the step,
+    and any unsure one, is refined to tol. round_tol <= tol or lam_lo <= 0 turns this off.
+
     contact, F, u are updated in place. ``guess`` is the first solve's guess for F (full
     grid); ``u_guess`` = C guess when has_u_guess. ``solved``: F and u already hold the
     solution on the current set (the first solve is skipped). Counts go to ``stats``;
-    ``fstats`` holds the largest relative residual of the solves (updated), then the
+    ``fstats`` holds the largest relative residual of the tol-solves (updated), then the
     relative residual and ||b|| of the last solve. ``threaded``: spread the large
     transforms over the Numba threads (tfm.kernels.fft.convolve)."""
     N = n * n
+    marks = np.zeros(N, dtype=np.int8)
+    loose_ok = round_tol > tol and lam_lo > 0.0 and not single
     first = True
     while True:
+        loose = False
+        loose_conv = True
+        bnorm = 0.0
+        res = 0.0
+        idx = np.flatnonzero(contact)
         if not (first and solved):
-            idx = np.flatnonzero(contact)
             if idx.size == 0:
                 F[:] = 0.0
                 u[:] = 0.0
@@ -195,19 +260,25 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                 fstats[F_LAST_RES] = 0.0
                 fstats[F_LAST_BNORM] = 0.0
             else:
+                loose = loose_ok and stats[S_ROUNDS] + 1 < max_rounds
                 b = d - x0[idx]
                 Fc = guess[idx]
                 Ax0 = u_guess[idx] if has_u_guess else b
                 it, conv, res = solve_on_set(idx, b, Fc, Ax0, has_u_guess, n, spacing, cut2, diag,
-                                             syms, isyms, pre, stencil, tol, max_iter, threaded)
+                                             syms, isyms, pre, stencil,
+                                             round_tol if loose else tol, max_iter, threaded)
                 stats[S_SOLVES] += 1
                 stats[S_ITERS] += it
                 stats[S_LAST_ITERS] = it
-                if not conv:
-                    stats[S_FAILURES] += 1
-                fstats[F_MAX_RES] = max(fstats[F_MAX_RES], res)
+                bnorm = np.sqrt(blocked_dot(b, b))
+                if loose and conv and res <= tol:
+                    loose = False          # the guess already met tol
+                if not loose:
+                    if not conv:
+                        stats[S_FAILURES] += 1
+                    fstats[F_MAX_RES] = max(fstats[F_MAX_RES], res)
                 fstats[F_LAST_RES] = res
-                fstats[F_LAST_BNORM] = np.sqrt(blocked_dot(b, b))
+                fstats[F_LAST_BNORM] = bnorm
                 F[:] = 0.0
                 F[idx] = Fc
                 if has_u_guess and it == 0:
@@ -215,34 +286,40 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                     u[:] = u_guess
                 else:
                     field_from_set(idx, Fc, n, sym_full, src, spec, out, u, threaded)
+                loose_conv = conv
         first = False
         has_u_guess = False
         stats[S_ROUNDS] += 1
-        # Decisions ignore violations at the level of the solve's own error.
-        any_contact = False
-        scale_f = 0.0
-        scale_u = abs(d)
-        for i in range(N):
-            if contact[i]:
-                any_contact = True
-                scale_f = max(scale_f, abs(F[i]))
-            scale_u = max(scale_u, abs(u[i]))
-        slack_f = slack * tol * scale_f
-        slack_u = slack * tol * scale_u
-        n_over = 0
-        n_into = 0
-        worst_over = -1
-        worst_into = -1
-        for i in range(N):
-            if contact[i]:
-                if F[i] > f_th[i] + slack_f:
-                    n_over += 1
-                    if worst_over < 0 or F[i] - f_th[i] > F[worst_over] - f_th[worst_over]:
-                        worst_over = i
-            elif x0[i] + u[i] > d + slack_u:
-                n_into += 1
-                if worst_into < 0 or x0[i] + u[i] > x0[worst_into] + u[worst_into]:
-                    worst_into = i
+        slack_f, slack_u = _slacks(d, contact, F, u, slack * tol)
+        if loose:
+            # distance to a tol-solve (the 1e-12 covers CG's recursive-residual drift),
+            # widened by what it can move the slack itself
+            e = (res + tol + 1e-12) * bnorm / lam_lo
+            bf = e * (1.0 + slack * tol) * (1.0 + 1e-9)
+            bu = row_norm * e * (1.0 + slack * tol) * (1.0 + 1e-9)
+            n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f, slack_u,
+                                                       bf, bu, marks)
+            if unsure > 0 or (n_over == 0 and n_into == 0) or not loose_conv:
+                # the step may end here, or a fate is in doubt: refine this solve to tol
+                Fc = F[idx]
+                it, conv, res = solve_on_set(idx, d - x0[idx], Fc, u[idx], True, n, spacing,
+                                             cut2, diag, syms, isyms, pre, stencil, tol,
+                                             max_iter, threaded)
+                stats[S_ITERS] += it
+                stats[S_LAST_ITERS] += it
+                stats[S_REFINES] += 1
+                if not conv:
+                    stats[S_FAILURES] += 1
+                fstats[F_MAX_RES] = max(fstats[F_MAX_RES], res)
+                fstats[F_LAST_RES] = res
+                if it > 0:
+                    F[idx] = Fc
+                    field_from_set(idx, Fc, n, sym_full, src, spec, out, u, threaded)
+                    slack_f, slack_u = _slacks(d, contact, F, u, slack * tol)
+                loose = False
+        if not loose:
+            n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f, slack_u,
+                                                       -1.0, -1.0, marks)
         if n_over == 0 and n_into == 0:
             break
         if stats[S_ROUNDS] >= max_rounds:
@@ -252,19 +329,18 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
         if single:
             # the 'single' rule: change only the worst violator (a snap before an entry)
             if n_over > 0:
-                contact[worst_over] = False
-                guess[worst_over] = 0.0
+                contact[wo] = False
+                guess[wo] = 0.0
                 stats[S_SNAPPED] += 1
             else:
-                contact[worst_into] = True
+                contact[wi] = True
                 stats[S_ENTERED] += 1
             continue
         for i in range(N):
-            if contact[i]:
-                if F[i] > f_th[i] + slack_f:
-                    contact[i] = False
-                    guess[i] = 0.0
-            elif x0[i] + u[i] > d + slack_u:
+            if marks[i] == 1:
+                contact[i] = False
+                guess[i] = 0.0
+            elif marks[i] == 2:
                 contact[i] = True
         stats[S_SNAPPED] += n_over
         stats[S_ENTERED] += n_into
