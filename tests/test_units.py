@@ -104,6 +104,8 @@ def test_units_parameters_sweep_in_a_campaign():
     (dict(alpha=0.5), "alpha: must be 0.75 with work_of_adhesion"),
     (dict(k_th_coefficient="limt"), "k_th_coefficient: unknown value 'limt'"),
     (dict(k_th_coefficient=-2), "k_th_coefficient: must be > 0"),
+    (dict(k_th_coefficient="limit", self_term=3.0), "k_th_coefficient: 'limit' is measured only for self_term"),
+    (dict(k_th_coefficient="limit", kernel="neighbors"), "k_th_coefficient: 'limit' was measured with the boussinesq"),
     (dict(kernel="local"), "kernel: units='si' needs"),
     (dict(units="cgs"), "units: unknown value 'cgs'"),
 ])
@@ -117,3 +119,25 @@ def test_si_fields_refused_in_paper_units():
         Params(youngs_modulus=1e6)
     with pytest.raises(ParameterError, match="k_th_coefficient: 'jkr' has no effect .* units='si'"):
         Params(k_th_coefficient="jkr")
+
+
+def test_limit_coefficient_is_the_measured_limit_and_is_stored_as_a_number():
+    """"limit" is make limit's paraboloid fit for the run's self term (the committed
+    results/limit/summary.json, to the 3 decimals the table keeps), and a record stores the
+    number: a later, refined limit cannot change what an old record means."""
+    import json
+    import pathlib
+
+    from tfm.units import LIMIT_COEFFICIENTS
+    summary = pathlib.Path(__file__).parents[1] / "results" / "limit" / "summary.json"
+    fits = {f["self_term"]: f["y_inf"] for f in json.loads(summary.read_text())["fits"]
+            if f["geometry"] == "paraboloid" and f["source"] == "fit"}
+    assert set(fits) == set(LIMIT_COEFFICIENTS)
+    for s, c in LIMIT_COEFFICIENTS.items():
+        assert c == round(fits[s], 3)
+        p = Params.from_dict({**SI, "spacing": R / 32, "step": R * 1e-3, "self_term": s,
+                              "k_th_coefficient": "limit"})
+        assert p.k_th_coefficient == c
+        assert p.run_id == p.replace(k_th_coefficient=c).run_id
+    assert Params.from_dict({**SI, "spacing": R / 32, "step": R * 1e-3,
+                             "k_th_coefficient": "limit"}).k_th_coefficient == LIMIT_COEFFICIENTS[3.8]

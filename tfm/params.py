@@ -669,11 +669,24 @@ def _validate_units(p: Params) -> None:
     """units, the material and K_th's coefficient (tfm.units)."""
     _choice("units", p.units, UNITS)
     coefficient = p.k_th_coefficient
+    if coefficient == "limit" and p.units == "si" and p.work_of_adhesion is not None:
+        # a measured value that a longer campaign may refine: the record keeps the number,
+        # so its run id and its K_th stay reproducible from the table
+        from .units import limit_coefficient
+        if p.kernel != "boussinesq":
+            raise ParameterError(f"k_th_coefficient: 'limit' was measured with the boussinesq kernel, "
+                                 f"not {p.kernel!r}; give the coefficient as a number")
+        try:
+            coefficient = limit_coefficient(p.self_term)
+        except ValueError as e:
+            raise ParameterError(str(e)) from None
+        object.__setattr__(p, "k_th_coefficient", coefficient)
     if isinstance(coefficient, str):
         from .units import K_TH_COEFFICIENTS
-        _choice("k_th_coefficient", coefficient, tuple(K_TH_COEFFICIENTS))
+        _choice("k_th_coefficient", coefficient, tuple(K_TH_COEFFICIENTS) + ("limit",))
     elif _finite("k_th_coefficient", coefficient) <= 0:
-        raise ParameterError(f"k_th_coefficient: must be > 0 or a name (paper, jkr), got {coefficient!r}")
+        raise ParameterError(f"k_th_coefficient: must be > 0 or a name (paper, jkr, limit), "
+                             f"got {coefficient!r}")
     if p.units == "paper":
         return                              # SI-only fields: APPLIES
     if p.youngs_modulus is None or p.poisson_ratio is None:

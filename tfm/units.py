@@ -11,8 +11,9 @@ for the threshold F_th = K_th A^(3/4) (alpha = 0.75, the LEFM scaling; other alp
 the relation depend on the spacing, so an SI run with ``work_of_adhesion`` needs
 alpha = 0.75). ``k_th_coefficient`` is c: a number, or a name from
 ``K_TH_COEFFICIENTS`` ("paper" = 7.6, the paper's fit at spacing 1/256; "jkr" =
-3 pi^2/4, the continuum JKR/LEFM value). With c equal to the coefficient the model
-actually shows at the run's resolution, the pull-off equals (3/2) pi gamma R.
+3 pi^2/4, the continuum JKR/LEFM value), or "limit", this model's measured continuum
+limit for the run's self term (``LIMIT_COEFFICIENTS``). With c equal to the coefficient
+the model actually shows at the run's resolution, the pull-off equals (3/2) pi gamma R.
 
 An SI run is solved as a paper-units run with L* = 1 m: lengths keep their numbers (in
 metres), forces are divided by F* = pi E* (1 m)^2, and K_th becomes
@@ -26,11 +27,32 @@ import math
 from .theory import JKR_COEFFICIENT, PAPER_COEFFICIENT
 
 #: named values of k_th_coefficient (c in F_max = c K_th^2 R). Add a name here to make
-#: it selectable (e.g. a measured continuum limit).
+#: it selectable.
 K_TH_COEFFICIENTS: dict[str, float] = {
     "paper": PAPER_COEFFICIENT,
     "jkr": JKR_COEFFICIENT,
 }
+
+#: k_th_coefficient = "limit": this model's own continuum limit c_inf of F_max/(K_th^2 R),
+#: measured per self term by `make limit` (results/limit/summary.json, paraboloid fits,
+#: alpha = 0.75, a_c/Delta up to 161; tests/test_units.py keeps the two in step). It
+#: depends on the self term, and it may move as the campaign is refined, so a record
+#: stores the number, not the name (tfm.params).
+LIMIT_COEFFICIENTS: dict[float, float] = {
+    2.9732: 5.652,
+    3.5255: 7.031,
+    3.8: 7.687,
+}
+
+
+def limit_coefficient(self_term: float) -> float:
+    """c_inf measured for this self term (``k_th_coefficient = "limit"``)."""
+    for s, c in LIMIT_COEFFICIENTS.items():
+        if abs(self_term - s) <= 1e-9 * s:
+            return c
+    known = ", ".join(f"{s:g}" for s in LIMIT_COEFFICIENTS)
+    raise ValueError(f"k_th_coefficient: 'limit' is measured only for self_term in {{{known}}}, "
+                     f"got self_term = {self_term!r}; give the coefficient as a number")
 
 #: L* of an SI run, in metres
 LENGTH_SCALE_SI = 1.0

@@ -209,6 +209,21 @@ def paper_ratio_range(results_dir=None) -> tuple[float, float, float]:
     return min(ratios), max(ratios), spec.runs[0].params.spacing
 
 
+def units_note(para) -> str:
+    """Whether tfm.units' "limit" coefficients are these fits (to the 3 decimals they keep)."""
+    from ..units import LIMIT_COEFFICIENTS
+    fitted = {r.self_term: round(r.estimate[0], 3) for r in para
+              if r.estimate[3] == "fit" and math.isfinite(r.estimate[0])}
+    stale = [f"{s:g}: {LIMIT_COEFFICIENTS.get(s)} vs {c:.3f}" for s, c in fitted.items()
+             if LIMIT_COEFFICIENTS.get(s) != c]
+    used = ", ".join(f"{c:.3f} (self term {s:g})" for s, c in LIMIT_COEFFICIENTS.items())
+    if stale:
+        return ("`k_th_coefficient = \"limit\"` still holds older values; update "
+                f"`tfm.units.LIMIT_COEFFICIENTS` ({'; '.join(stale)}).")
+    return (f"`k_th_coefficient = \"limit\"` derives K_th from γ with these fitted c∞: {used} "
+            "(`tfm.units.LIMIT_COEFFICIENTS`; a record stores the number).")
+
+
 def verdict_76(res: LimitResult) -> str:
     """What the limit at the paper's self term says about the paper's 7.6."""
     best, low, high, source = res.estimate
@@ -365,6 +380,8 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
     same = same_constant(results)
     if same:
         lines += ["- **One lattice constant for both geometries?**"] + ["  " + s for s in same]
+    if para:
+        lines.append("- **In SI runs** " + units_note(para))
     if not para:
         lines.append("- no paraboloid fit yet (fewer than "
                      f"{MIN_FIT_POINTS} points per self term).")
