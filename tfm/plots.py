@@ -221,7 +221,9 @@ def _curve_axes(ax1, ax2):
     ax2.set_ylabel("contact radius $a$")
     for ax in (ax1, ax2):
         ax.axhline(0, color="0.7", lw=0.5)
-        ax.legend(loc="best")
+    # one legend: (b) draws the same lines, and a second box found no free corner in a(P)
+    # (it covered the origin, where the curves start)
+    ax1.legend(loc="best")
     tidy_ticks(ax1, ax2)
     letter((ax1, ax2))
 
