@@ -60,7 +60,7 @@ PARAM_HELP = {
     "youngs_modulus": "units=si: Young's modulus E (Pa)",
     "poisson_ratio": "units=si: Poisson ratio nu in (-1, 0.5]",
     "work_of_adhesion": "units=si: gamma (J/m^2); K_th from the paper's last equation",
-    "k_th_coefficient": "units=si: c in F_max = c K_th^2 R: a number, paper (7.6) or jkr (3 pi^2/4)",
+    "k_th_coefficient": "units=si: c in F_max = c K_th^2 R: a number, paper (7.6), jkr (3 pi^2/4) or limit (the measured continuum limit for the self term; stored as its number)",
     "allow": "guards to override, comma-separated: coarse, step, tol, memory (docs/physics.md)",
 }
 
