@@ -139,7 +139,7 @@ def test_loose_decision_rounds_rest_on_rigorous_bounds():
 
 @pytest.mark.parametrize("spacing", ["1/64", "1/128"])
 def test_loose_decision_rounds_change_no_decision(spacing):
-    """The standard curve with decision-only rounds solved to round_tol and with every
+    """The standard curve with decision-only rounds stopped at ROUND_TOLS and with every
     round solved to tol: the same contact count at every step, and forces within what the
     two tol-solves can differ by (tol 1e-10 relative on ||b||, condition ~10^2: 1e-7 of the
     largest force leaves margin). The loose path must actually have been taken."""
@@ -148,7 +148,7 @@ def test_loose_decision_rounds_change_no_decision(spacing):
     for loose in (True, False):
         prob, _ = build_problem(p)
         if not loose:
-            prob.round_tol = prob.tol
+            prob.round_tols = ()
         runs.append(run(p, prob))
     a, b = runs
     assert a.refines > 0 and b.refines == 0
@@ -157,3 +157,27 @@ def test_loose_decision_rounds_change_no_decision(spacing):
     fa = np.array([s.force for s in a.steps])
     fb = np.array([s.force for s in b.steps])
     assert np.allclose(fa, fb, rtol=0, atol=1e-7 * np.abs(fb).max())
+
+
+def test_stopped_and_continued_cg_is_one_solve():
+    """cg_run stopped at a loose residual and carried on to tol repeats the operations of
+    one uninterrupted solve: the same iterate, bit for bit, after the same number of
+    iterations (what lets snap_rounds stop a solve for a decision at no cost)."""
+    from tfm.kernels.contact import PRE_FFT, cg_run, cg_start, cg_workspace, solve_on_set
+    p = Params.from_dict(dict(STANDARD, spacing="1/64"))
+    prob, layout = build_problem(p)
+    op = prob.operator
+    idx = np.flatnonzero(np.hypot(layout.x, layout.y) < 0.2)
+    b = 0.01 - prob.x0[idx]
+    stencil = np.zeros((1, 1))
+    args = (op.n, op.spacing, op.cut2, op.diag, op.syms, op.isyms)
+    whole = np.zeros(idx.size)
+    it_whole, conv, _ = solve_on_set(idx, b, whole, b, False, *args, PRE_FFT, stencil, 1e-10, 500, False)
+    assert conv and it_whole > 3
+    parts = np.zeros(idx.size)
+    ws = cg_workspace(idx, *args)
+    state = cg_start(ws, idx, b, parts, b, False, op.n, False)
+    its = [cg_run(ws, state, idx, parts, op.n, op.diag, stencil, PRE_FFT, tol, 500, False)[0]
+           for tol in (1e-4, 1e-7, 1e-10)]
+    assert min(its) > 0 and sum(its) == it_whole
+    assert np.array_equal(parts, whole)

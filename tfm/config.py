@@ -19,14 +19,17 @@ STENCIL_RADIUS = 3
 # residual tolerance, so that round-off cannot make a spring flicker in and out.
 DECISION_SLACK = 10.0
 
-# Relative residual of a solve whose only use is to decide which springs snap or enter
-# (tfm.kernels.contact.snap_rounds): accepted only when a rigorous bound shows that a
-# tol-solve would decide the same; the last round of every step is still solved to tol.
-# CG iterations of the standard curve, every round at tol against ROUND_TOL = 1e-6, 1e-7,
-# 1e-8: 1/256 8930, 8122, 7431, 7801; 1/512 17566, -, 14070, 14586 (1/128: 4619 at tol,
-# 3935 at 1e-6, 4067 at 1e-7, 4351 at 1e-5). Looser values leave more springs unsure,
-# and their refinement costs more than the loose solve saved.
-ROUND_TOL = 1e-7
+# Relative residuals at which a solve whose only use is to decide which springs snap or
+# enter stops to ask whether its decisions are already certain (tfm.kernels.contact.
+# snap_rounds): accepted only when a rigorous bound shows that a tol-solve would decide the
+# same; otherwise CG carries on, without restarting, to the next level and then to tol.
+# The last round of every step is solved to tol. CG iterations of the standard curve
+# (python -m bench.run_bench --only rounds prints them): 1/256, every round at tol 8930,
+# (1e-7,) 7122, (1e-4, 1e-7) 7081, (1e-3, 1e-5, 1e-7) 6916, (1e-5, 1e-8) 7395; 1/128,
+# 4619, 3836, 3721, 3531, 3655. The extra levels save under 3 % of the iterations but
+# each stop can cost a field u = C F on the whole grid: no faster. A single level of 1e-6
+# or looser leaves more springs in doubt (1/128: 1e-5 3904, 1e-4 4422).
+ROUND_TOLS = (1e-7,)
 
 
 # Box size P from which the compiled FFT spreads its fixed chunks over the Numba threads

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import DECISION_SLACK, ROUND_TOL
+from .config import DECISION_SLACK, ROUND_TOLS
 from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, PRE_DIAGONAL, PRE_FFT,
                               PRE_NONE, PRE_STENCIL, S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS,
                               S_REFINES, S_ROUNDS, S_SNAPPED, S_SOLVES, field_from_set, snap_rounds,
@@ -82,7 +82,7 @@ class Problem:
     max_rounds: int
     snap_rule: str          # "batch" (paper) or "single"
     skip_solves: bool = False  # predict F on an unchanged set (bench: no gain at 1/128)
-    round_tol: float = ROUND_TOL  # decision-only rounds (compiled path; <= tol: off)
+    round_tols: tuple = ROUND_TOLS  # decision levels of the rounds (compiled path; (): off)
 
 
 @dataclass
@@ -179,7 +179,7 @@ class ContactState:
                     self._x0, self._f_th, op.n, op.spacing, op.cut2, op.diag, op.syms, op.isyms,
                     self._pre, self._stencil, self._sym_full, self._src, self._spec, self._out,
                     prob.tol, prob.max_iter, prob.max_rounds, prob.snap_rule == "single",
-                    DECISION_SLACK, prob.round_tol, self._lam_lo, self._row_norm, stats, fstats,
+                    DECISION_SLACK, np.array(prob.round_tols, dtype=float), self._lam_lo, self._row_norm, stats, fstats,
                     self.threaded)
         out.max_residual = float(fstats[F_MAX_RES])
         out.n_solves += int(stats[S_SOLVES])

@@ -8,8 +8,9 @@ the same box) and the work buffers are set up before the first CG iteration and 
 all of them. Dot products are summed in fixed blocks (blocked_dot), the transforms in
 fixed chunks (tfm.kernels.fft), so the iterates do not depend on the number of threads.
 
-A round whose solve only decides which springs change is solved to config.ROUND_TOL, not
-tol, when a rigorous bound shows a tol-solve would decide the same (snap_rounds).
+A round whose solve only decides which springs change stops at the looser residuals of
+config.ROUND_TOLS, when a rigorous bound shows a tol-solve would decide the same, and
+carries on from there if not (snap_rounds; the CG state is kept, cg_run).
 """
 import numpy as np
 from numba import njit, types
@@ -91,25 +92,25 @@ def _precondition(kind, r, z, idx, n, diag, stencil, isym, i0, j0, h, box, spec,
 
 
 @njit(**NUMBA_OPTS)
-def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, pre, stencil,
-                 tol, max_iter, threaded):
-    """PCG for C_SS x = b on the contact set idx (sorted flat indices), from the guess x
-    (overwritten), stopping at ||b - C x|| <= tol ||b||. ``Ax0`` = C x when has_Ax0 saves
-    the first application. Returns (iterations, converged, relative residual)."""
-    m = idx.size
-    bnorm = np.sqrt(blocked_dot(b, b))
-    if bnorm == 0.0:
-        x[:] = 0.0
-        return 0, True, 0.0
+def cg_workspace(idx, n, spacing, cut2, diag, syms, isyms):
+    """The operator restricted to the contact set idx, built once per solve: its bounding
+    box (i0, j0, width h), the symbol and inverse symbol for the box's FFT size, and the
+    transform buffers of the operator and of the preconditioner."""
     i0, j0, w, h = index_box(n, idx)
     P = fast_len(2 * w - 1)
     sym, isym = box_symbols(syms, isyms, P, cut2, spacing, diag[0])
-    box = np.zeros((w, w))
-    spec = np.zeros((w, P // 2 + 1), dtype=np.complex128)
-    out = np.empty((w, P))
-    pbox = np.zeros((w, w), dtype=isym.dtype)
-    pspec = np.zeros((w, P // 2 + 1), dtype=PRECOND_CDTYPE)
-    pout = np.empty((w, P), dtype=isym.dtype)
+    return (i0, j0, h, sym, isym, np.zeros((w, w)), np.zeros((w, P // 2 + 1), dtype=np.complex128),
+            np.empty((w, P)), np.zeros((w, w), dtype=isym.dtype),
+            np.zeros((w, P // 2 + 1), dtype=PRECOND_CDTYPE), np.empty((w, P), dtype=isym.dtype))
+
+
+@njit(**NUMBA_OPTS)
+def cg_start(ws, idx, b, x, Ax0, has_Ax0, n, threaded):
+    """CG state for C_SS x = b from the guess x: (r, z, p, Ap, sc) with sc = [r.z, ||r||,
+    ||b||, phase]; phase 0: not started, 1: p is the next direction, 2: r was updated last
+    and z, p still have to follow. ``Ax0`` = C x when has_Ax0 saves the first application."""
+    i0, j0, h, sym, isym, box, spec, out, pbox, pspec, pout = ws
+    m = idx.size
     Ap = np.empty(m)
     if has_Ax0:
         r = b - Ax0
@@ -124,33 +125,72 @@ def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, p
             r = b - Ap
         else:
             r = b.copy()
-    rnorm = np.sqrt(blocked_dot(r, r))
-    if rnorm <= tol * bnorm:
-        return 0, True, rnorm / bnorm
-    z = np.empty(m)
+    sc = np.array([0.0, np.sqrt(blocked_dot(r, r)), np.sqrt(blocked_dot(b, b)), 0.0])
+    return r, np.empty(m), np.empty(m), Ap, sc
+
+
+@njit(**NUMBA_OPTS)
+def _next_direction(ws, pre, r, z, p, rz, idx, n, diag, stencil, threaded):
+    """z = M r, then p = z + (r.z / rz) p; returns the new r.z."""
+    i0, j0, h, sym, isym, box, spec, out, pbox, pspec, pout = ws
     _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout, threaded)
-    p = z.copy()
-    rz = blocked_dot(r, z)
+    rz_new = blocked_dot(r, z)
+    beta = rz_new / rz
+    for k in range(idx.size):
+        p[k] = z[k] + beta * p[k]
+    return rz_new
+
+
+@njit(**NUMBA_OPTS)
+def cg_run(ws, state, idx, x, n, diag, stencil, pre, tol, max_iter, threaded):
+    """Carry PCG on from ``state`` until ||r|| <= tol ||b|| or max_iter iterations in this
+    call. A later call with a smaller tol continues the same Krylov sequence (no restart),
+    so a solve stopped early for a decision loses nothing when it must go on. Returns
+    (iterations, converged, relative residual)."""
+    i0, j0, h, sym, isym, box, spec, out, pbox, pspec, pout = ws
+    r, z, p, Ap, sc = state
+    m = idx.size
+    bnorm = sc[2]
+    if bnorm == 0.0:
+        x[:] = 0.0
+        return 0, True, 0.0
+    if sc[1] <= tol * bnorm:
+        return 0, True, sc[1] / bnorm
+    if sc[3] == 0.0:
+        _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout, threaded)
+        p[:] = z
+        sc[0] = blocked_dot(r, z)
+    elif sc[3] == 2.0:
+        # the last call stopped after updating r: finish that iteration's direction
+        sc[0] = _next_direction(ws, pre, r, z, p, sc[0], idx, n, diag, stencil, threaded)
+    sc[3] = 1.0
     for it in range(1, max_iter + 1):
         _box_apply(sym, idx, p, n, i0, j0, h, box, spec, out, Ap, threaded)
         pAp = blocked_dot(p, Ap)
         if pAp <= 0.0:
             # only possible if C is not positive definite on this set (checked upstream)
-            return it, False, rnorm / bnorm
-        step = rz / pAp
+            return it, False, sc[1] / bnorm
+        step = sc[0] / pAp
         for k in range(m):
             x[k] += step * p[k]
             r[k] -= step * Ap[k]
-        rnorm = np.sqrt(blocked_dot(r, r))
-        if rnorm <= tol * bnorm:
-            return it, True, rnorm / bnorm
-        _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout, threaded)
-        rz_new = blocked_dot(r, z)
-        beta = rz_new / rz
-        for k in range(m):
-            p[k] = z[k] + beta * p[k]
-        rz = rz_new
-    return max_iter, False, rnorm / bnorm
+        sc[1] = np.sqrt(blocked_dot(r, r))
+        if sc[1] <= tol * bnorm:
+            sc[3] = 2.0
+            return it, True, sc[1] / bnorm
+        sc[0] = _next_direction(ws, pre, r, z, p, sc[0], idx, n, diag, stencil, threaded)
+    return max_iter, False, sc[1] / bnorm
+
+
+@njit(**NUMBA_OPTS)
+def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, pre, stencil,
+                 tol, max_iter, threaded):
+    """PCG for C_SS x = b on the contact set idx (sorted flat indices), from the guess x
+    (overwritten), stopping at ||b - C x|| <= tol ||b||. ``Ax0`` = C x when has_Ax0 saves
+    the first application. Returns (iterations, converged, relative residual)."""
+    ws = cg_workspace(idx, n, spacing, cut2, diag, syms, isyms)
+    state = cg_start(ws, idx, b, x, Ax0, has_Ax0, n, threaded)
+    return cg_run(ws, state, idx, x, n, diag, stencil, pre, tol, max_iter, threaded)
 
 
 @njit(**NUMBA_OPTS)
@@ -174,24 +214,27 @@ def field_from_set(idx, vals, n, sym_full, src, spec, out, u, threaded):
 
 
 @njit(**NUMBA_OPTS)
-def _slacks(d, contact, F, u, rel):
+def _slacks(d, contact, F, u, rel, with_u):
     """Decisions ignore violations at the level of the solve's own error: rel times the
-    largest contact force, and rel times the largest of |d| and |u|."""
+    largest contact force, and rel times the largest of |d| and |u| (|d| alone if not
+    with_u: u is not current)."""
     scale_f = 0.0
     scale_u = abs(d)
     for i in range(contact.size):
         if contact[i]:
             scale_f = max(scale_f, abs(F[i]))
-        scale_u = max(scale_u, abs(u[i]))
+        if with_u:
+            scale_u = max(scale_u, abs(u[i]))
     return rel * scale_f, rel * scale_u
 
 
 @njit(**NUMBA_OPTS)
-def _classify(d, contact, F, u, x0, f_th, slack_f, slack_u, bf, bu, marks):
+def _classify(d, contact, F, u, x0, f_th, slack_f, slack_u, bf, bu, marks, entries):
     """marks[i] = 1 if spring i snaps, 2 if it enters, 0 if it stays (Algorithm 1's rules,
     violations below the slack ignored). With bounds bf, bu > 0 on the distance to the
     tolerance-tol solution (forces, displacements), also counts the springs whose fate that
-    distance could change. Returns (snapping, entering, unsure, worst snap, worst entry)."""
+    distance could change. ``entries`` False: the contact springs only (u not needed).
+    Returns (snapping, entering, unsure, worst snap, worst entry)."""
     n_over = 0
     n_into = 0
     unsure = 0
@@ -208,7 +251,7 @@ def _classify(d, contact, F, u, x0, f_th, slack_f, slack_u, bf, bu, marks):
                     worst_over = i
             if abs(g) <= bf:
                 unsure += 1
-        else:
+        elif entries:
             g = x0[i] + u[i] - (d + slack_u)
             if g > 0.0:
                 marks[i] = 2
@@ -223,18 +266,22 @@ def _classify(d, contact, F, u, x0, f_th, slack_f, slack_u, bf, bu, marks):
 @njit(**NUMBA_OPTS)
 def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, n, spacing,
                 cut2, diag, syms, isyms, pre, stencil, sym_full, src, spec, out, tol, max_iter,
-                max_rounds, single, slack, round_tol, lam_lo, row_norm, stats, fstats, threaded):
+                max_rounds, single, slack, round_tols, lam_lo, row_norm, stats, fstats, threaded):
     """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
     snap every spring above its threshold and bring in every penetrating one (or only the
     worst, ``single``), until nothing changes or max_rounds is reached.
 
-    A round whose only use is to decide which springs change is solved to ``round_tol``
-    (> tol) only: ||F - F_tol|| <= (||r|| + tol ||b||) / lam_lo for any two solutions with
-    residuals r and tol ||b|| (lam_lo <= the smallest eigenvalue of every C_SS), and
-    |u_i - u_tol,i| <= row_norm times that (row_norm >= every row's 2-norm of C). A round
-    is accepted loose only if no spring lies within those bounds of its decision line, so
-    the sequence of contact sets is the one tol-solves give; the last round of the step,
-    and any unsure one, is refined to tol. round_tol <= tol or lam_lo <= 0 turns this off.
+    Decision levels. A round's solve stops at each of the loose relative residuals
+    ``round_tols`` (descending, all > tol) in turn and asks whether the decisions are
+    already certain: ||F - F_tol|| <= (||r|| + tol ||b||) / lam_lo for any two solutions
+    with residuals r and tol ||b|| (lam_lo <= the smallest eigenvalue of every C_SS), and
+    |u_i - u_tol,i| <= row_norm times that (row_norm >= every row's 2-norm of C). If no
+    spring lies within those bounds of its decision line and some spring changes, the
+    round's decisions are taken there; the sequence of contact sets is the one tol-solves
+    give. Otherwise CG carries on (same Krylov sequence, no restart) to the next level,
+    and finally to tol: the last round of every step is a tol-solve. The snap check needs
+    only F, so the field u is computed at a level only once no snap is in doubt. An empty
+    round_tols (or lam_lo <= 0) solves every round to tol.
 
     contact, F, u are updated in place. ``guess`` is the first solve's guess for F (full
     grid); ``u_guess`` = C guess when has_u_guess. ``solved``: F and u already hold the
@@ -244,12 +291,11 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     transforms over the Numba threads (tfm.kernels.fft.convolve)."""
     N = n * n
     marks = np.zeros(N, dtype=np.int8)
-    loose_ok = round_tol > tol and lam_lo > 0.0 and not single
+    loose_ok = round_tols.size > 0 and lam_lo > 0.0 and not single
     first = True
+    n_over = n_into = unsure = wo = wi = 0
     while True:
-        loose = False
-        loose_conv = True
-        bnorm = 0.0
+        decided = False
         res = 0.0
         idx = np.flatnonzero(contact)
         if not (first and solved):
@@ -260,66 +306,76 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                 fstats[F_LAST_RES] = 0.0
                 fstats[F_LAST_BNORM] = 0.0
             else:
-                loose = loose_ok and stats[S_ROUNDS] + 1 < max_rounds
                 b = d - x0[idx]
                 Fc = guess[idx]
                 Ax0 = u_guess[idx] if has_u_guess else b
-                it, conv, res = solve_on_set(idx, b, Fc, Ax0, has_u_guess, n, spacing, cut2, diag,
-                                             syms, isyms, pre, stencil,
-                                             round_tol if loose else tol, max_iter, threaded)
+                ws = cg_workspace(idx, n, spacing, cut2, diag, syms, isyms)
+                state = cg_start(ws, idx, b, Fc, Ax0, has_u_guess, n, threaded)
+                bnorm = state[4][2]
                 stats[S_SOLVES] += 1
-                stats[S_ITERS] += it
-                stats[S_LAST_ITERS] = it
-                bnorm = np.sqrt(blocked_dot(b, b))
-                if loose and conv and res <= tol:
-                    loose = False          # the guess already met tol
-                if not loose:
+                used = 0
+                stops = 0
+                u_fresh = False
+                if loose_ok and stats[S_ROUNDS] + 1 < max_rounds:
+                    for lev in round_tols:
+                        if lev <= tol:
+                            break
+                        it, conv, res = cg_run(ws, state, idx, Fc, n, diag, stencil, pre, lev,
+                                               max_iter - used, threaded)
+                        used += it
+                        if not conv or res <= tol:
+                            break          # the tol-solve below reports a failure
+                        stops += 1
+                        u_fresh = False
+                        F[:] = 0.0
+                        F[idx] = Fc
+                        # distance to a tol-solve (the 1e-12 covers CG's recursive-residual
+                        # drift), widened by what it can move the slack itself
+                        e = (res + tol + 1e-12) * bnorm / lam_lo * (1.0 + slack * tol) * (1.0 + 1e-9)
+                        slack_f, slack_u = _slacks(d, contact, F, u, slack * tol, False)
+                        n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f,
+                                                                   slack_u, e, row_norm * e, marks, False)
+                        if unsure > 0:
+                            continue
+                        if has_u_guess and used == 0:
+                            u[:] = u_guess     # the guess itself met the level
+                        else:
+                            field_from_set(idx, Fc, n, sym_full, src, spec, out, u, threaded)
+                        u_fresh = True
+                        slack_f, slack_u = _slacks(d, contact, F, u, slack * tol, True)
+                        n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f,
+                                                                   slack_u, e, row_norm * e, marks, True)
+                        if unsure == 0:
+                            # certain: take the decisions, or, if none, end the step at tol
+                            decided = n_over > 0 or n_into > 0
+                            break
+                if not decided:
+                    it, conv, res = cg_run(ws, state, idx, Fc, n, diag, stencil, pre, tol,
+                                           max_iter - used, threaded)
+                    used += it
+                    if stops > 0:
+                        stats[S_REFINES] += 1
                     if not conv:
                         stats[S_FAILURES] += 1
                     fstats[F_MAX_RES] = max(fstats[F_MAX_RES], res)
+                    F[:] = 0.0
+                    F[idx] = Fc
+                    if has_u_guess and used == 0:
+                        # an accepted guess needs no new field: u = C guess is already known
+                        u[:] = u_guess
+                    elif not (u_fresh and it == 0):
+                        field_from_set(idx, Fc, n, sym_full, src, spec, out, u, threaded)
                 fstats[F_LAST_RES] = res
                 fstats[F_LAST_BNORM] = bnorm
-                F[:] = 0.0
-                F[idx] = Fc
-                if has_u_guess and it == 0:
-                    # an accepted guess needs no new field: u = C guess is already known
-                    u[:] = u_guess
-                else:
-                    field_from_set(idx, Fc, n, sym_full, src, spec, out, u, threaded)
-                loose_conv = conv
+                stats[S_ITERS] += used
+                stats[S_LAST_ITERS] = used
         first = False
         has_u_guess = False
         stats[S_ROUNDS] += 1
-        slack_f, slack_u = _slacks(d, contact, F, u, slack * tol)
-        if loose:
-            # distance to a tol-solve (the 1e-12 covers CG's recursive-residual drift),
-            # widened by what it can move the slack itself
-            e = (res + tol + 1e-12) * bnorm / lam_lo
-            bf = e * (1.0 + slack * tol) * (1.0 + 1e-9)
-            bu = row_norm * e * (1.0 + slack * tol) * (1.0 + 1e-9)
+        if not decided:
+            slack_f, slack_u = _slacks(d, contact, F, u, slack * tol, True)
             n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f, slack_u,
-                                                       bf, bu, marks)
-            if unsure > 0 or (n_over == 0 and n_into == 0) or not loose_conv:
-                # the step may end here, or a fate is in doubt: refine this solve to tol
-                Fc = F[idx]
-                it, conv, res = solve_on_set(idx, d - x0[idx], Fc, u[idx], True, n, spacing,
-                                             cut2, diag, syms, isyms, pre, stencil, tol,
-                                             max_iter, threaded)
-                stats[S_ITERS] += it
-                stats[S_LAST_ITERS] += it
-                stats[S_REFINES] += 1
-                if not conv:
-                    stats[S_FAILURES] += 1
-                fstats[F_MAX_RES] = max(fstats[F_MAX_RES], res)
-                fstats[F_LAST_RES] = res
-                if it > 0:
-                    F[idx] = Fc
-                    field_from_set(idx, Fc, n, sym_full, src, spec, out, u, threaded)
-                    slack_f, slack_u = _slacks(d, contact, F, u, slack * tol)
-                loose = False
-        if not loose:
-            n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f, slack_u,
-                                                       -1.0, -1.0, marks)
+                                                       -1.0, -1.0, marks, True)
         if n_over == 0 and n_into == 0:
             break
         if stats[S_ROUNDS] >= max_rounds:
