@@ -105,6 +105,22 @@ def test_step_sampling_bound_is_one_steps_rise_over_the_peak():
     assert step_sampling_bound(curve) == pytest.approx(0.1 / 2.0)
 
 
+def test_step_sampling_bound_uses_the_contact_stiffness_when_every_step_snaps():
+    """Fine grids snap springs at every step near the pull-off: the bound is then the rise
+    of a fixed contact of the pull-off radius, 2 E* a per unit unloading (E* = 1/pi)."""
+    import math
+
+    import pandas as pd
+
+    tension = [0.0, 1.0, 1.5, 1.9, 2.0, 1.2]
+    curve = pd.DataFrame({"step": range(6), "phase": ["load"] + ["unload"] * 5,
+                          "force": [-t for t in tension], "n_snapped": [0, 4, 4, 4, 4, 9],
+                          "n_entered": [0] * 6, "d": [0.0, -0.01, -0.02, -0.03, -0.04, -0.05],
+                          "contact_radius": [0.3, 0.3, 0.28, 0.26, 0.25, 0.2]})
+    assert step_sampling_bound(curve) == pytest.approx(2 / math.pi * 0.25 * 0.01 / 2.0)
+    assert math.isnan(step_sampling_bound(curve.drop(columns="contact_radius")))
+
+
 # ---- the limit campaigns (issue 12) ---------------------------------------------------
 @pytest.mark.parametrize("stem", ["limit_sphere", "limit_punch"])
 def test_limit_campaign_covers_the_range(stem):

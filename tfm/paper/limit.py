@@ -333,7 +333,9 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
     lines += ["", "## The limit per self term", "", md_table(summary_table(results)), "",
               "y∞ is F_max/(K_th² R) extrapolated to Δ → 0 for the paraboloid and F_max/F_Kendall for the punch. "
               "“step bound” is how much the sampled F_max can miss the top of the force curve (one step's rise "
-              "just before the pull-off, `tfm.analysis.step_sampling_bound`); “preload check” compares F_max at "
+              "just before the pull-off, `tfm.analysis.step_sampling_bound`; where every step there snaps "
+              "springs, the rise of a fixed contact of the pull-off radius, stiffness 2E*a); “preload check” "
+              "compares F_max at "
               "a deeper preload with the main one at the same spacing. A p interval marked ≤ or ≥ reaches the "
               f"search range {analysis.LIMIT_P_BOUNDS} and is open there.", ""]
     lines += ["## What it means", ""]
