@@ -584,3 +584,31 @@ def test_a_capped_auto_preload_is_said_before_a_campaign_runs(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.index("auto preload capped") < err.index("campaign capped: 1 runs done")
     assert load_tables(root)[0]["status"].tolist() == ["flagged"]
+
+
+def test_where_computes_only_the_selected_runs_and_resumes_the_rest(tmp_path, capsys):
+    """--where KEY=VALUE: only matching runs are computed (values read as in the file, so
+    a fraction matches its number); the tables hold what is stored; a later plain run
+    finishes the rest. Bad selections fail before anything runs, naming what exists."""
+    text = ('name = "part"\n[base]\nk_th = 0.02\nshape = "paraboloid"\nmax_indent = 0.025\n'
+            '[sweep]\nalpha = [0.5, 0.75]\nspacing = ["1/16", "1/20"]\n')
+    path = _write(tmp_path, text)
+    res = tmp_path / "res"
+    args = ["campaign", "run", str(path), "--results-dir", str(res), "-q"]
+    assert tfm_main(args + ["--where", "alpha=0.75", "--where", "spacing=1/20"]) == 0
+    spec = load_spec(path)
+    store = CampaignStore.for_spec(spec, res)
+    done = store.status(spec).done
+    assert len(done) == 1
+    (run,) = [r for r in spec.runs if r.run_id in done]
+    assert run.params.alpha == 0.75 and run.params.spacing == pytest.approx(1 / 20)
+    summary, _ = load_tables(spec.name, results_dir=res)
+    assert list(summary["run_id"]) == done
+    assert tfm_main(args) == 0
+    assert len(store.status(spec).done) == 4
+    capsys.readouterr()
+    for where, message in (("alpha=0.6", "its values of alpha: 0.5, 0.75"),
+                           ("alpah=0.75", "did you mean 'alpha'"),
+                           ("alpha", "expected KEY=VALUE")):
+        assert tfm_main(args + ["--where", where]) == 2
+        assert message in capsys.readouterr().err

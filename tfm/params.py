@@ -239,11 +239,7 @@ class Params:
         prefix = f"{where}: " if where else ""
         clean: dict[str, Any] = {}
         for key, value in values.items():
-            if key not in names:
-                close = difflib.get_close_matches(key, names, n=1)
-                hint = f" (did you mean {close[0]!r}?)" if close else ""
-                raise ParameterError(f"{prefix}unknown parameter {key!r}{hint}")
-            clean[key] = _coerce(key, value, prefix)
+            clean[key] = parse_param(key, value, where)
         # an explicit k_th without f_th means "use k_th"; so does an SI run (its threshold
         # follows from work_of_adhesion, and the default f_th is in paper units)
         if (clean.get("k_th") is not None or clean.get("units") == "si") and "f_th" not in clean:
@@ -394,6 +390,18 @@ def _check_applies(p: Params) -> None:
             continue
         raise ParameterError(f"{name}: {value!r} has no effect here; it applies only when {rule.when} "
                              f"(leave it at its default {_DEFAULTS[name]!r})")
+
+
+def parse_param(key: str, value: Any, where: str = "") -> Any:
+    """One parameter's value from loose input, as Params.from_dict reads it (fractions
+    accepted); an unknown name is refused with the closest known one."""
+    names = Params.field_names()
+    prefix = f"{where}: " if where else ""
+    if key not in names:
+        close = difflib.get_close_matches(key, names, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ParameterError(f"{prefix}unknown parameter {key!r}{hint}")
+    return _coerce(key, value, prefix)
 
 
 def _coerce(key: str, value: Any, prefix: str) -> Any:

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .runner import run_campaign
-from .spec import CampaignError, CampaignSpec, Run, load_spec, spec_from_dict
+from .spec import CampaignError, CampaignSpec, Run, load_spec, select_runs, spec_from_dict
 from .store import CampaignStore, Status
 
 
@@ -35,4 +35,4 @@ def load_failures(name_or_path, results_dir="results") -> pd.DataFrame:
 
 
 __all__ = ["CampaignError", "CampaignSpec", "CampaignStore", "Run", "Status", "campaign_root",
-           "load_failures", "load_spec", "load_tables", "run_campaign", "spec_from_dict"]
+           "load_failures", "load_spec", "load_tables", "run_campaign", "select_runs", "spec_from_dict"]

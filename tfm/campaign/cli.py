@@ -30,6 +30,9 @@ def register(subparsers) -> None:
                      help="do not retry runs that failed before")
     run.add_argument("--rerun-stale", action="store_true",
                      help="recompute runs stored by another tfm version or git commit")
+    run.add_argument("--where", action="append", default=[], metavar="KEY=VALUE",
+                     help="compute only the runs with this parameter value, e.g. self_term=3.8 or "
+                          "spacing=1/1340 (repeat to combine); the rest stay pending")
     _max_runs_flag(run)
     run.set_defaults(func=cmd_run)
 
@@ -62,10 +65,13 @@ def cmd_run(args) -> int:
     from .runner import run_campaign
     from .store import CampaignStore
 
+    from .spec import select_runs
+
     spec = load_spec(args.file, max_runs=args.max_runs)
+    only = {r.run_id for r in select_runs(spec, args.where)} if args.where else None
     root = run_campaign(spec, jobs=args.jobs, scheduler=args.scheduler, quiet=args.quiet,
                         results_dir=args.results_dir, retry_failed=not args.skip_failed,
-                        rerun_stale=args.rerun_stale)
+                        rerun_stale=args.rerun_stale, only=only)
     status = CampaignStore(root).status(spec)
     if status.flagged and not args.quiet:
         print(f"{len(status.flagged)} runs are flagged (see the r_warnings column of "

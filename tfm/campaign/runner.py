@@ -46,7 +46,7 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
 
 def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = False,
                  results_dir: str | os.PathLike = "results", retry_failed: bool = True,
-                 rerun_stale: bool = False) -> Path:
+                 rerun_stale: bool = False, only=None) -> Path:
     """Run every run of a campaign that is not stored yet; return ``results_dir/<name>``.
 
     ``jobs`` > 1 uses a local process pool; ``scheduler`` (an address such as
@@ -54,7 +54,8 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
     Finished runs are skipped, so calling it again after a crash resumes the campaign.
     Failed runs are tried again unless ``retry_failed=False``. Runs stored by another
     tfm version or commit are kept (with a warning) unless ``rerun_stale=True``: the run id
-    hashes the parameters, not the code.
+    hashes the parameters, not the code. ``only`` (run ids, e.g. from select_runs) limits
+    what is computed now; the campaign tables still cover every stored run.
     """
     spec = spec_or_path if isinstance(spec_or_path, CampaignSpec) else load_spec(spec_or_path)
     if not isinstance(jobs, int) or jobs < 1:
@@ -72,6 +73,8 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
                 print(f"warning: campaign {spec.name}: {len(status.stale)} stored runs were computed "
                       "by another tfm version or commit (see prov_git_commit); they are kept. "
                       "Use --rerun-stale to recompute them.", file=sys.stderr)
+        if only is not None:
+            redo &= set(only)
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo and scheduler is None:
             _check_memory(spec, todo, min(jobs, len(todo)))

@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ..guards import GuardError, check
-from ..params import ParameterError, Params, ParameterWarning
+from ..params import ParameterError, Params, ParameterWarning, parse_param
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -245,3 +245,34 @@ def _hint(key: str, names) -> str:
 
 def _label(swept: Mapping[str, Any]) -> str:
     return "(" + ", ".join(f"{k}={v!r}" for k, v in swept.items()) + ")" if swept else ""
+
+
+def select_runs(spec: CampaignSpec, where) -> list[Run]:
+    """The runs of ``spec`` whose parameters match every ``KEY=VALUE`` of ``where`` (values
+    read as in a campaign file: "spacing=1/1340", "self_term=3.8"; numbers compared to 1e-12
+    relative). Refused, before anything runs: a malformed item, an unknown parameter, and a
+    selection that matches no run (the message lists the values the campaign has)."""
+    conditions = []
+    for item in where:
+        key, sep, raw = str(item).partition("=")
+        key = key.strip().replace("-", "_")
+        if not sep or not key or not raw.strip():
+            raise CampaignError(f"--where: expected KEY=VALUE, got {item!r}")
+        conditions.append((key, raw.strip(), parse_param(key, raw.strip(), "--where")))
+
+    def same(a, b) -> bool:
+        if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
+            return math.isclose(a, b, rel_tol=1e-12, abs_tol=0.0)
+        return a == b
+
+    chosen = [r for r in spec.runs if all(same(getattr(r.params, k), v) for k, _, v in conditions)]
+    if not chosen:
+        for key, raw, value in conditions:
+            have = sorted({getattr(r.params, key) for r in spec.runs}, key=str)
+            if not any(same(h, value) for h in have):
+                shown = ", ".join(f"{h:g}" if isinstance(h, float) else str(h) for h in have[:12])
+                raise CampaignError(f"--where: no run of campaign {spec.name!r} has {key}={raw}; "
+                                    f"its values of {key}: {shown}{', ...' if len(have) > 12 else ''}")
+        raise CampaignError(f"--where: no run of campaign {spec.name!r} matches all of "
+                            f"{', '.join(f'{k}={r}' for k, r, _ in conditions)}")
+    return chosen
