@@ -187,3 +187,20 @@ def test_tfm_limit_refuses_bad_options(capsys):
     assert main(["limit", "--jobs", "0", "--analyse-only"]) == 2
     assert "jobs" in capsys.readouterr().err
     assert main(["limit", "--max-ratio", "-1", "--analyse-only"]) == 2
+
+
+def test_limit_where_and_max_ratio_select_runs_in_both_campaigns():
+    """`tfm limit --where self_term=3.8 --max-ratio 20` computes exactly those points of
+    both geometries; a value neither campaign has is refused before anything runs."""
+    from tfm.campaign import CampaignError
+    from tfm.paper.limit import LIMIT_CAMPAIGNS, select_limit_runs, spec_ratio
+    from tfm.paper.run import load_spec_for
+
+    specs = {g: load_spec_for(stem) for g, stem in LIMIT_CAMPAIGNS}
+    assert select_limit_runs(specs, None, []) is None
+    only = select_limit_runs(specs, 20.0, ["self_term=3.8"])
+    for g, spec in specs.items():
+        want = {r.run_id for r in spec.runs if r.params.self_term == 3.8 and spec_ratio(r.params) <= 20.0 * (1 + 1e-9)}
+        assert only[g] == want and want
+    with pytest.raises(CampaignError, match="self_term"):
+        select_limit_runs(specs, None, ["self_term=9"])

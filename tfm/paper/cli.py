@@ -22,6 +22,9 @@ def add_limit_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("-j", "--jobs", type=int, default=1, help="parallel runs (process pool); default 1")
     ap.add_argument("--max-ratio", type=float, default=None, metavar="N",
                     help="run only the points with a_c/Δ <= N (the rest stay pending; rerun without it to finish)")
+    ap.add_argument("--where", action="append", default=[], metavar="KEY=VALUE",
+                    help="run only the points with this parameter value, e.g. self_term=3.8 (repeat to "
+                         "combine; with --max-ratio both apply)")
     ap.add_argument("--analyse-only", action="store_true",
                     help="run nothing: fit and report the points stored so far (safe while a campaign runs)")
     ap.add_argument("--results-dir", default="results", help="campaign tables (default results)")

@@ -421,6 +421,30 @@ def summary_line(out_dir: Path) -> str | None:
             f"{fit['y_inf']:.3f} [{fit['y_inf_low']:.3f}, {fit['y_inf_high']:.3f}] (95 %, {fit['source']}).")
 
 
+def select_limit_runs(specs: dict, max_ratio: float | None, where) -> dict | None:
+    """Run ids to compute now per geometry: a_c/Δ <= max_ratio and every KEY=VALUE of
+    ``where`` (tfm.campaign.select_runs); None for all. A ``where`` that matches no run in
+    either campaign is refused."""
+    from ..campaign import CampaignError, select_runs
+
+    if max_ratio is None and not where:
+        return None
+    only, errors = {}, []
+    for geometry, spec in specs.items():
+        runs = spec.runs
+        if where:
+            try:
+                runs = select_runs(spec, where)
+            except CampaignError as exc:
+                errors.append(exc)
+                runs = ()
+        only[geometry] = {r.run_id for r in runs
+                          if max_ratio is None or spec_ratio(r.params) <= max_ratio * (1 + 1e-9)}
+    if len(errors) == len(specs):
+        raise errors[0]
+    return only
+
+
 def main_limit(args) -> int:
     from ..params import ParameterError
     from .report import machine
@@ -435,12 +459,9 @@ def main_limit(args) -> int:
     results_dir = Path(args.results_dir)
     specs = {geometry: load_spec_for(stem) for geometry, stem in LIMIT_CAMPAIGNS}
     computed = 0
+    only = select_limit_runs(specs, args.max_ratio, args.where)
     if not args.analyse_only:
-        todo = specs
-        if args.max_ratio is not None:
-            todo = {g: dataclasses.replace(s, runs=tuple(r for r in s.runs if spec_ratio(r.params) <= args.max_ratio * (1 + 1e-9)))
-                    for g, s in specs.items()}
-        done = run_specs(todo, args.jobs, results_dir, quiet=args.quiet)
+        done = run_specs(specs, args.jobs, results_dir, quiet=args.quiet, only=only)
         computed = sum(n for _, n in done.values())
     frames = [stored_points(g, spec, results_dir) for g, spec in specs.items()]
     points = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()

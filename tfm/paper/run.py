@@ -94,20 +94,24 @@ def load_spec_for(stem: str, quick: bool = False):
     return quick_spec(path) if quick else load_spec(path)
 
 
-def run_specs(specs: dict, jobs: int, results_dir: Path, quiet: bool = False, order=None) -> dict[str, tuple[float, int]]:
+def run_specs(specs: dict, jobs: int, results_dir: Path, quiet: bool = False, order=None,
+              only: dict | None = None) -> dict[str, tuple[float, int]]:
     """Run (or resume) each campaign with ``tfm.campaign.run_campaign``, one after the
-    other, each over ``jobs`` workers. Returns ``{key: (seconds, runs computed now)}``."""
+    other, each over ``jobs`` workers; ``only[key]`` (run ids) limits what is computed
+    now. Returns ``{key: (seconds, runs computed now)}``."""
     from ..campaign import CampaignStore, run_campaign
 
     out = {}
     for key in order or list(specs):
         spec = specs[key]
-        stored = len(CampaignStore.for_spec(spec, results_dir).status(spec).done)
+        store = CampaignStore.for_spec(spec, results_dir)
+        stored = len(store.status(spec).done)
         if not quiet:
             print(f"[tfm.paper] {spec.name}: {len(spec.runs)} runs, {stored} stored", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
-        run_campaign(spec, jobs=jobs, quiet=quiet, results_dir=results_dir)
-        out[key] = (time.perf_counter() - t0, len(spec.runs) - stored)
+        run_campaign(spec, jobs=jobs, quiet=quiet, results_dir=results_dir,
+                     only=None if only is None else only.get(key, set()))
+        out[key] = (time.perf_counter() - t0, len(store.status(spec).done) - stored)
     return out
 
 
