@@ -1,5 +1,6 @@
 """Start-up time of the light commands (issue 8: under 0.5 s): medians of 11 fresh
-processes, wall and CPU, beside a bare `python -c pass`.
+processes, wall and CPU, beside a bare `python -c pass`; and the floor of `tfm run` (its
+imports and Numba's first cache load, with no curve and no plot).
 
     python -m bench.startup
 """
@@ -20,6 +21,9 @@ COMMANDS = {
     "tfm run --help": ["-m", "tfm", "run", "--help"],
     "tfm campaign status": ["-m", "tfm", "campaign", "status", "campaigns/smoke.toml",
                             "--results-dir", "/nonexistent-results"],
+    # the floor of `tfm run`: its imports and Numba's first cache load, no curve, no plot
+    "tfm run's imports": ["-c", "import tfm.protocol, tfm.simulate, pandas, pyarrow.parquet, tfm.plots; "
+                                "from tfm.kernels.fft import fast_len; fast_len(5)"],
 }
 
 
@@ -37,7 +41,7 @@ def main(repeats: int = 11) -> None:
             cpu[name].append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; medians of {repeats}")
     for name in COMMANDS:
-        print(f"{name:22s} wall {statistics.median(wall[name]):.3f} s  cpu {statistics.median(cpu[name]):.3f} s")
+        print(f"{name:24s} wall {statistics.median(wall[name]):.3f} s  cpu {statistics.median(cpu[name]):.3f} s")
 
 
 if __name__ == "__main__":
