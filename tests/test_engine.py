@@ -163,21 +163,18 @@ def test_stopped_and_continued_cg_is_one_solve():
     """cg_run stopped at a loose residual and carried on to tol repeats the operations of
     one uninterrupted solve: the same iterate, bit for bit, after the same number of
     iterations (what lets snap_rounds stop a solve for a decision at no cost)."""
-    from tfm.kernels.contact import PRE_FFT, cg_run, cg_start, cg_workspace, solve_on_set
+    from tfm.kernels.contact import cg_run, cg_start, cg_workspace, solve_on_set
     p = Params.from_dict(dict(STANDARD, spacing="1/64"))
     prob, layout = build_problem(p)
-    op = prob.operator
+    op, pre = prob.operator.compiled(), prob.precond.compiled()
     idx = np.flatnonzero(np.hypot(layout.x, layout.y) < 0.2)
     b = 0.01 - prob.x0[idx]
-    stencil = np.zeros((1, 1))
-    args = (op.n, op.spacing, op.cut2, op.diag, op.syms, op.isyms)
     whole = np.zeros(idx.size)
-    it_whole, conv, _ = solve_on_set(idx, b, whole, b, False, *args, PRE_FFT, stencil, 1e-10, 500, False)
+    it_whole, conv, _ = solve_on_set(op, pre, idx, b, whole, b, False, 1e-10, 500, np.zeros(0), False)
     assert conv and it_whole > 3
     parts = np.zeros(idx.size)
-    ws = cg_workspace(idx, *args)
-    state = cg_start(ws, idx, b, parts, b, False, op.n, False)
-    its = [cg_run(ws, state, idx, parts, op.n, op.diag, stencil, PRE_FFT, tol, 500, False)[0]
-           for tol in (1e-4, 1e-7, 1e-10)]
+    ws = cg_workspace(op, pre, idx)
+    state = cg_start(op, ws, idx, b, parts, b, False)
+    its = [cg_run(op, pre, ws, state, idx, parts, tol, 500)[0] for tol in (1e-4, 1e-7, 1e-10)]
     assert min(its) > 0 and sum(its) == it_whole
     assert np.array_equal(parts, whole)

@@ -6,7 +6,9 @@ diagonal is ``self_term / sqrt(A_i)`` (Love's regularization; the paper's 3.8/De
 square grid) or ``c_w / A_i`` for the Winkler kernel.
 
 Every operator has the same call: ``apply(src, f_src, tgt=None)`` with index arrays of
-springs; ``tgt=None`` means every spring. The dense matrix is never formed.
+springs; ``tgt=None`` means every spring. The dense matrix is never formed. For the
+compiled loop of Algorithm 1 each operator and preconditioner also gives its data as
+``compiled()`` (tfm.kernels.ops), which runs the same kernels.
 """
 from __future__ import annotations
 
@@ -21,7 +23,8 @@ from .config import STENCIL_RADIUS
 from .geometry import Layout
 from .kernels import fft as fftk
 from .kernels.compliance import BOUSSINESQ, LOCAL, NEIGHBORS, cutoff_squared
-from .kernels.contact import box_symbols, new_symbol_cache
+from .kernels.ops import (PRE_DIAGONAL, PRE_FFT, PRE_NONE, PRE_STENCIL, DirectData, FFTData, PreData,
+                          box_symbols, new_symbol_cache, start_threads)
 from .kernels.direct import direct_sum
 from .kernels.grid import index_box, stencil_apply
 from .params import ParameterError, Params
@@ -102,6 +105,15 @@ class FFTOperator:
             self._threads_pay = fftk.threads_pay(self.n, sym, numba.get_num_threads())
         return self._threads_pay
 
+    def compiled(self) -> FFTData:
+        """The operator's data for the compiled loop, with buffers for the whole-grid field."""
+        start_threads()
+        n = self.n
+        P = fftk.fast_len(2 * n - 1)
+        return FFTData(n, self.spacing, self.cut2, self.diag, self.syms, self.isyms, self.symbols(P)[0],
+                       np.zeros((n, n)), np.zeros((n, P // 2 + 1), dtype=np.complex128),
+                       np.empty((n, P)), self.threaded())
+
     def apply_inverse(self, src, f_src, tgt=None):
         """C^-1 on the box of src and tgt (the FFT preconditioner): same transforms."""
         return self._convolve(src, f_src, tgt, 1)
@@ -132,6 +144,12 @@ class DirectOperator:
         self.spec = spec
         self.x, self.y = layout.x, layout.y
         self.all = np.arange(layout.n)
+
+    def compiled(self) -> DirectData:
+        start_threads()
+        return DirectData(np.ascontiguousarray(self.x, dtype=float), np.ascontiguousarray(self.y, dtype=float),
+                          np.ascontiguousarray(self.spec.diag, dtype=float),
+                          cutoff_squared(self.spec.kind, self.spec.cutoff))
 
     def apply(self, src, f_src, tgt=None):
         tgt = self.all if tgt is None else tgt
@@ -208,6 +226,9 @@ class StencilPreconditioner:
     def __call__(self, idx, r):
         return stencil_apply(idx // self.n, idx % self.n, r, self.n, self.stencil)
 
+    def compiled(self) -> PreData:
+        return pre_data(PRE_STENCIL, stencil=self.stencil, n=self.n)
+
 
 class FFTPreconditioner:
     """R C^-1 R^T with the inverse symbol on the contact's box (two FFTs per application)."""
@@ -220,6 +241,11 @@ class FFTPreconditioner:
     def __call__(self, idx, r):
         return self.op.apply_inverse(idx, r, idx)
 
+    def compiled(self) -> PreData:
+        op = self.op
+        return pre_data(PRE_FFT, n=op.n, spacing=op.spacing, cut2=op.cut2, diag0=float(op.diag[0]),
+                        syms=op.syms, isyms=op.isyms, threaded=op.threaded())
+
 
 class DiagonalPreconditioner:
     name = "diagonal"
@@ -229,6 +255,19 @@ class DiagonalPreconditioner:
 
     def __call__(self, idx, r):
         return self.inv[idx] * r
+
+    def compiled(self) -> PreData:
+        return pre_data(PRE_DIAGONAL, inv_diag=self.inv)
+
+
+def pre_data(kind=PRE_NONE, inv_diag=None, stencil=None, n=0, spacing=0.0, cut2=0.0, diag0=0.0,
+             syms=None, isyms=None, threaded=False) -> PreData:
+    """PreData with empty stand-ins for what the kind does not use (Numba needs one type)."""
+    if syms is None:
+        syms, isyms = new_symbol_cache(0, np.ones((1, 1)))
+    return PreData(kind, np.ascontiguousarray(np.ones(1) if inv_diag is None else inv_diag, dtype=float),
+                   np.ascontiguousarray(np.zeros((1, 1)) if stencil is None else stencil, dtype=float),
+                   int(n), float(spacing), float(cut2), float(diag0), syms, isyms, bool(threaded))
 
 
 def make_preconditioner(p: Params, spec: KernelSpec, layout: Layout, symbol=None, operator=None):

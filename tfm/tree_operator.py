@@ -27,6 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .kernels.compliance import BOUSSINESQ, LOCAL, NEIGHBORS
+from .kernels.ops import SparseData, TreeData, start_threads
 from .kernels.tree import (MORTON_BITS, build_nodes, csr_apply, evaluate, morton_keys,
                            node_boxes, node_geometry, node_moments, subset_order)
 
@@ -167,6 +168,21 @@ class TreeOperator:
             self._tgt_groups = self.build_targets(tgt)
             self._tgt = tgt.copy()
         return self._tgt_groups
+
+    def compiled(self):
+        """The operator's data for the compiled loop (tfm.kernels.ops): the tree's for 1/r,
+        the neighbour list (empty rows for the local kernel) otherwise."""
+        start_threads()
+        if self.kind == BOUSSINESQ:
+            g = self._targets(None)
+            return TreeData(self.x, self.y, self.diag, self.keys, self.order_all, self.theta, self.order,
+                            self.leaf_size, self.group_size, g.perm, g.tx, g.ty, g.tidx, g.tdiag, g.gstart,
+                            g.gend, g.gbox)
+        if self.kind == NEIGHBORS:
+            indptr, indices, weights = self.csr
+        else:
+            indptr, indices, weights = np.zeros(self.n + 1, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0)
+        return SparseData(indptr, indices, weights, self.diag)
 
     # ---------------------------------------------------------------- applying
     def evaluate(self, tree: SourceTree, groups: TargetGroups, f_src) -> np.ndarray:

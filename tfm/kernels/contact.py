@@ -1,33 +1,24 @@
 """Algorithm 1 of the paper (Sec. 2.1) in compiled code: the contact solve (PCG) and the
-snapping rounds of one dilatation step, on the square grid with the FFT operator.
+snapping rounds of one dilatation step, for every operator.
 
 For a fixed contact set S the forces solve C_SS F = d - x0_S (paper, Eq. 1), a symmetric
-positive-definite system. Each solve restricts the operator to S once: the bounding box
-of S, its FFT size P, the symbol and the inverse symbol (the preconditioner, R C^-1 R^T on
-the same box) and the work buffers are set up before the first CG iteration and shared by
-all of them. Dot products are summed in fixed blocks (blocked_dot), the transforms in
-fixed chunks (tfm.kernels.fft), so the iterates do not depend on the number of threads.
+positive-definite system. Each solve restricts the operator and the preconditioner to S
+once (tfm.kernels.ops: the box, FFT size and symbols, or the trees, and the work buffers)
+before the first CG iteration, and all iterations share them. Dot products are summed in
+fixed blocks (blocked_dot), transforms and tree walks in fixed orders, so the iterates do
+not depend on the number of threads.
 
 A round whose solve only decides which springs change stops at the looser residuals of
 config.ROUND_TOLS, when a rigorous bound shows a tol-solve would decide the same, and
 carries on from there if not (snap_rounds; the CG state is kept, cg_run).
 """
 import numpy as np
-from numba import njit, types
-from numba.typed import Dict
+from numba import njit
 
 from ..config import NUMBA_OPTS
-from .fft import convolve, fast_len, symbol
-from .grid import blocked_dot, index_box, stencil_apply
+from .grid import blocked_dot
+from .ops import apply_set, field, precondition, restrict, restrict_pre
 
-# The FFT preconditioner in single precision (off: at 1/128 it cost 5 % more CG iterations
-# and saved no measurable time on the shared 2-core machine). Only the
-# preconditioner: residuals, operator and iterates stay double.
-PRECOND_SINGLE = False
-PRECOND_DTYPE = np.float32 if PRECOND_SINGLE else np.float64
-PRECOND_CDTYPE = np.complex64 if PRECOND_SINGLE else np.complex128
-# preconditioner codes
-PRE_NONE, PRE_DIAGONAL, PRE_FFT, PRE_STENCIL = 0, 1, 2, 3
 # slots of the integer statistics array
 (S_SOLVES, S_ITERS, S_FAILURES, S_ROUNDS, S_SNAPPED, S_ENTERED, S_EXCEEDED, S_LAST_ITERS,
  S_REFINES) = range(9)
@@ -36,80 +27,18 @@ N_STATS = 9
 F_MAX_RES, F_LAST_RES, F_LAST_BNORM = range(3)
 
 
-SYMBOL_ARRAY = types.float64[:, ::1]
-PRECOND_ARRAY = types.Array(types.float32 if PRECOND_SINGLE else types.float64, 2, "C")
+@njit(**NUMBA_OPTS)
+def cg_workspace(op, pre, idx):
+    """The operator and the preconditioner restricted to the contact set idx, built once
+    per solve (tfm.kernels.ops.restrict, restrict_pre)."""
+    return restrict(op, idx), restrict_pre(pre, idx)
 
 
 @njit(**NUMBA_OPTS)
-def new_symbol_cache(P, sym):
-    """Empty typed dicts P -> symbol and P -> inverse symbol (with ``sym`` at P if P > 0).
-
-    Made in compiled code: filling a typed dict from Python compiles its methods anew in
-    every process (about 1.7 s of a 1/128 run's start-up)."""
-    syms = Dict.empty(key_type=types.int64, value_type=SYMBOL_ARRAY)
-    isyms = Dict.empty(key_type=types.int64, value_type=PRECOND_ARRAY)
-    if P > 0:
-        syms[P] = sym
-        isyms[P] = (1.0 / sym).astype(PRECOND_DTYPE)
-    return syms, isyms
-
-
-@njit(**NUMBA_OPTS)
-def box_symbols(syms, isyms, P, cut2, spacing, diag0):
-    """The symbol and its inverse for box size P, cached in the typed dicts."""
-    if P not in syms:
-        s = symbol(cut2, spacing, diag0, P)
-        syms[P] = s
-        isyms[P] = (1.0 / s).astype(PRECOND_DTYPE)
-    return syms[P], isyms[P]
-
-
-@njit(**NUMBA_OPTS)
-def _box_apply(sym, idx, vals, n, i0, j0, h, box, spec, out, res, threaded):
-    """res = C_SS vals (or its inverse-symbol twin) for the springs idx of the box."""
-    box[:h] = 0.0
-    for k in range(idx.size):
-        f = idx[k]
-        box[f // n - i0, f % n - j0] = vals[k]
-    convolve(box, 0, h, spec, out, sym, threaded)
-    for k in range(idx.size):
-        f = idx[k]
-        res[k] = out[f // n - i0, f % n - j0]
-
-
-@njit(**NUMBA_OPTS)
-def _precondition(kind, r, z, idx, n, diag, stencil, isym, i0, j0, h, box, spec, out, threaded):
-    """z = M r; the FFT inverse runs in the precision of isym and its buffers."""
-    if kind == PRE_FFT:
-        _box_apply(isym, idx, r, n, i0, j0, h, box, spec, out, z, threaded)
-    elif kind == PRE_DIAGONAL:
-        for k in range(idx.size):
-            z[k] = r[k] / diag[idx[k]]
-    elif kind == PRE_STENCIL:
-        z[:] = stencil_apply(idx // n, idx % n, r, n, stencil)
-    else:
-        z[:] = r
-
-
-@njit(**NUMBA_OPTS)
-def cg_workspace(idx, n, spacing, cut2, diag, syms, isyms):
-    """The operator restricted to the contact set idx, built once per solve: its bounding
-    box (i0, j0, width h), the symbol and inverse symbol for the box's FFT size, and the
-    transform buffers of the operator and of the preconditioner."""
-    i0, j0, w, h = index_box(n, idx)
-    P = fast_len(2 * w - 1)
-    sym, isym = box_symbols(syms, isyms, P, cut2, spacing, diag[0])
-    return (i0, j0, h, sym, isym, np.zeros((w, w)), np.zeros((w, P // 2 + 1), dtype=np.complex128),
-            np.empty((w, P)), np.zeros((w, w), dtype=isym.dtype),
-            np.zeros((w, P // 2 + 1), dtype=PRECOND_CDTYPE), np.empty((w, P), dtype=isym.dtype))
-
-
-@njit(**NUMBA_OPTS)
-def cg_start(ws, idx, b, x, Ax0, has_Ax0, n, threaded):
+def cg_start(op, ws, idx, b, x, Ax0, has_Ax0):
     """CG state for C_SS x = b from the guess x: (r, z, p, Ap, sc) with sc = [r.z, ||r||,
     ||b||, phase]; phase 0: not started, 1: p is the next direction, 2: r was updated last
     and z, p still have to follow. ``Ax0`` = C x when has_Ax0 saves the first application."""
-    i0, j0, h, sym, isym, box, spec, out, pbox, pspec, pout = ws
     m = idx.size
     Ap = np.empty(m)
     if has_Ax0:
@@ -121,7 +50,7 @@ def cg_start(ws, idx, b, x, Ax0, has_Ax0, n, threaded):
                 nonzero = True
                 break
         if nonzero:
-            _box_apply(sym, idx, x, n, i0, j0, h, box, spec, out, Ap, threaded)
+            apply_set(op, ws[0], idx, x, Ap)
             r = b - Ap
         else:
             r = b.copy()
@@ -130,10 +59,9 @@ def cg_start(ws, idx, b, x, Ax0, has_Ax0, n, threaded):
 
 
 @njit(**NUMBA_OPTS)
-def _next_direction(ws, pre, r, z, p, rz, idx, n, diag, stencil, threaded):
+def _next_direction(pre, ws, r, z, p, rz, idx):
     """z = M r, then p = z + (r.z / rz) p; returns the new r.z."""
-    i0, j0, h, sym, isym, box, spec, out, pbox, pspec, pout = ws
-    _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout, threaded)
+    precondition(pre, ws[1], idx, r, z)
     rz_new = blocked_dot(r, z)
     beta = rz_new / rz
     for k in range(idx.size):
@@ -142,12 +70,11 @@ def _next_direction(ws, pre, r, z, p, rz, idx, n, diag, stencil, threaded):
 
 
 @njit(**NUMBA_OPTS)
-def cg_run(ws, state, idx, x, n, diag, stencil, pre, tol, max_iter, threaded):
+def cg_run(op, pre, ws, state, idx, x, tol, max_iter):
     """Carry PCG on from ``state`` until ||r|| <= tol ||b|| or max_iter iterations in this
     call. A later call with a smaller tol continues the same Krylov sequence (no restart),
     so a solve stopped early for a decision loses nothing when it must go on. Returns
     (iterations, converged, relative residual)."""
-    i0, j0, h, sym, isym, box, spec, out, pbox, pspec, pout = ws
     r, z, p, Ap, sc = state
     m = idx.size
     bnorm = sc[2]
@@ -157,15 +84,15 @@ def cg_run(ws, state, idx, x, n, diag, stencil, pre, tol, max_iter, threaded):
     if sc[1] <= tol * bnorm:
         return 0, True, sc[1] / bnorm
     if sc[3] == 0.0:
-        _precondition(pre, r, z, idx, n, diag, stencil, isym, i0, j0, h, pbox, pspec, pout, threaded)
+        precondition(pre, ws[1], idx, r, z)
         p[:] = z
         sc[0] = blocked_dot(r, z)
     elif sc[3] == 2.0:
         # the last call stopped after updating r: finish that iteration's direction
-        sc[0] = _next_direction(ws, pre, r, z, p, sc[0], idx, n, diag, stencil, threaded)
+        sc[0] = _next_direction(pre, ws, r, z, p, sc[0], idx)
     sc[3] = 1.0
     for it in range(1, max_iter + 1):
-        _box_apply(sym, idx, p, n, i0, j0, h, box, spec, out, Ap, threaded)
+        apply_set(op, ws[0], idx, p, Ap)
         pAp = blocked_dot(p, Ap)
         if pAp <= 0.0:
             # only possible if C is not positive definite on this set (checked upstream)
@@ -178,39 +105,22 @@ def cg_run(ws, state, idx, x, n, diag, stencil, pre, tol, max_iter, threaded):
         if sc[1] <= tol * bnorm:
             sc[3] = 2.0
             return it, True, sc[1] / bnorm
-        sc[0] = _next_direction(ws, pre, r, z, p, sc[0], idx, n, diag, stencil, threaded)
+        sc[0] = _next_direction(pre, ws, r, z, p, sc[0], idx)
     return max_iter, False, sc[1] / bnorm
 
 
 @njit(**NUMBA_OPTS)
-def solve_on_set(idx, b, x, Ax0, has_Ax0, n, spacing, cut2, diag, syms, isyms, pre, stencil,
-                 tol, max_iter, threaded):
+def solve_on_set(op, pre, idx, b, x, Ax0, has_Ax0, tol, max_iter, u, with_field):
     """PCG for C_SS x = b on the contact set idx (sorted flat indices), from the guess x
     (overwritten), stopping at ||b - C x|| <= tol ||b||. ``Ax0`` = C x when has_Ax0 saves
-    the first application. Returns (iterations, converged, relative residual)."""
-    ws = cg_workspace(idx, n, spacing, cut2, diag, syms, isyms)
-    state = cg_start(ws, idx, b, x, Ax0, has_Ax0, n, threaded)
-    return cg_run(ws, state, idx, x, n, diag, stencil, pre, tol, max_iter, threaded)
-
-
-@njit(**NUMBA_OPTS)
-def field_from_set(idx, vals, n, sym_full, src, spec, out, u, threaded):
-    """u = C F on the whole n x n grid for forces vals on the springs idx (F = 0 elsewhere).
-
-    The box is the grid itself (width n, P = sym_full.shape[0]); only the rows holding
-    sources are transformed forward."""
-    u[:] = 0.0
-    if idx.size == 0:
-        return
-    r0 = idx[0] // n
-    r1 = idx[idx.size - 1] // n + 1
-    src[r0:r1] = 0.0
-    for k in range(idx.size):
-        src[idx[k] // n, idx[k] % n] = vals[k]
-    convolve(src, r0, r1, spec, out, sym_full, threaded)
-    for i in range(n):
-        for j in range(n):
-            u[i * n + j] = out[i, j]
+    the first application. With with_field, u (one entry per spring) receives the field
+    C x (x on idx, 0 elsewhere). Returns (iterations, converged, relative residual)."""
+    ws = cg_workspace(op, pre, idx)
+    state = cg_start(op, ws, idx, b, x, Ax0, has_Ax0)
+    res = cg_run(op, pre, ws, state, idx, x, tol, max_iter)
+    if with_field:
+        field(op, ws[0], idx, x, u)
+    return res
 
 
 @njit(**NUMBA_OPTS)
@@ -264,9 +174,8 @@ def _classify(d, contact, F, u, x0, f_th, slack_f, slack_u, bf, bu, marks, entri
 
 
 @njit(**NUMBA_OPTS)
-def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, n, spacing,
-                cut2, diag, syms, isyms, pre, stencil, sym_full, src, spec, out, tol, max_iter,
-                max_rounds, single, slack, round_tols, lam_lo, row_norm, stats, fstats, threaded):
+def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, op, pre, tol,
+                max_iter, max_rounds, single, slack, round_tols, lam_lo, row_norm, stats, fstats):
     """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
     snap every spring above its threshold and bring in every penetrating one (or only the
     worst, ``single``), until nothing changes or max_rounds is reached.
@@ -283,13 +192,13 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     only F, so the field u is computed at a level only once no snap is in doubt. An empty
     round_tols (or lam_lo <= 0) solves every round to tol.
 
-    contact, F, u are updated in place. ``guess`` is the first solve's guess for F (full
-    grid); ``u_guess`` = C guess when has_u_guess. ``solved``: F and u already hold the
-    solution on the current set (the first solve is skipped). Counts go to ``stats``;
-    ``fstats`` holds the largest relative residual of the tol-solves (updated), then the
-    relative residual and ||b|| of the last solve. ``threaded``: spread the large
-    transforms over the Numba threads (tfm.kernels.fft.convolve)."""
-    N = n * n
+    ``op`` and ``pre`` are the operator's and the preconditioner's data (tfm.kernels.ops).
+    contact, F, u are updated in place (one entry per spring). ``guess`` is the first
+    solve's guess for F; ``u_guess`` = C guess when has_u_guess. ``solved``: F and u
+    already hold the solution on the current set (the first solve is skipped). Counts go
+    to ``stats``; ``fstats`` holds the largest relative residual of the tol-solves
+    (updated), then the relative residual and ||b|| of the last solve."""
+    N = contact.size
     marks = np.zeros(N, dtype=np.int8)
     loose_ok = round_tols.size > 0 and lam_lo > 0.0 and not single
     first = True
@@ -309,8 +218,8 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                 b = d - x0[idx]
                 Fc = guess[idx]
                 Ax0 = u_guess[idx] if has_u_guess else b
-                ws = cg_workspace(idx, n, spacing, cut2, diag, syms, isyms)
-                state = cg_start(ws, idx, b, Fc, Ax0, has_u_guess, n, threaded)
+                ws = cg_workspace(op, pre, idx)
+                state = cg_start(op, ws, idx, b, Fc, Ax0, has_u_guess)
                 bnorm = state[4][2]
                 stats[S_SOLVES] += 1
                 used = 0
@@ -320,8 +229,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                     for lev in round_tols:
                         if lev <= tol:
                             break
-                        it, conv, res = cg_run(ws, state, idx, Fc, n, diag, stencil, pre, lev,
-                                               max_iter - used, threaded)
+                        it, conv, res = cg_run(op, pre, ws, state, idx, Fc, lev, max_iter - used)
                         used += it
                         if not conv or res <= tol:
                             break          # the tol-solve below reports a failure
@@ -340,7 +248,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                         if has_u_guess and used == 0:
                             u[:] = u_guess     # the guess itself met the level
                         else:
-                            field_from_set(idx, Fc, n, sym_full, src, spec, out, u, threaded)
+                            field(op, ws[0], idx, Fc, u)
                         u_fresh = True
                         slack_f, slack_u = _slacks(d, contact, F, u, slack * tol, True)
                         n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f,
@@ -350,8 +258,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                             decided = n_over > 0 or n_into > 0
                             break
                 if not decided:
-                    it, conv, res = cg_run(ws, state, idx, Fc, n, diag, stencil, pre, tol,
-                                           max_iter - used, threaded)
+                    it, conv, res = cg_run(op, pre, ws, state, idx, Fc, tol, max_iter - used)
                     used += it
                     if stops > 0:
                         stats[S_REFINES] += 1
@@ -364,7 +271,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                         # an accepted guess needs no new field: u = C guess is already known
                         u[:] = u_guess
                     elif not (u_fresh and it == 0):
-                        field_from_set(idx, Fc, n, sym_full, src, spec, out, u, threaded)
+                        field(op, ws[0], idx, Fc, u)
                 fstats[F_LAST_RES] = res
                 fstats[F_LAST_BNORM] = bnorm
                 stats[S_ITERS] += used

@@ -1,0 +1,347 @@
+"""The compliance C and the preconditioner M, restricted to a contact set, in compiled code.
+
+Algorithm 1's loop (tfm.kernels.contact) is written once, for every operator. It sees an
+operator only through three calls:
+
+    ws = restrict(op, idx)          once per solve: box and symbols, trees, buffers
+    apply_set(op, ws, idx, v, out)  out = C_SS v on the contact set idx
+    field(op, ws, idx, v, u)        u = C F on every spring (F = v on idx, 0 elsewhere)
+
+``op`` is the operator's data, a NamedTuple made by its ``compiled()`` (tfm.operators):
+FFTData (square grid), DirectData (any layout), TreeData (Barnes-Hut, 1/r) or SparseData
+(the local and truncated kernels as a neighbour list). Numba picks the implementation from
+the type when it compiles, so the loop is compiled once per operator kind, each kept in
+the disk cache, with no function passed at run time (which Numba cannot cache).
+
+The preconditioner is one type, PreData, with a kind code: restrict_pre and precondition.
+Each implementation calls the same kernels as the operator's own ``apply``, on the same
+inputs, so the compiled loop gives the bits of the Python operator calls.
+"""
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numba import njit, types
+from numba.extending import overload
+from numba.typed import Dict
+
+from ..config import NUMBA_OPTS
+from .direct import _pair_sums
+from .fft import convolve, fast_len, symbol
+from .grid import index_box, stencil_apply
+from .tree import (MORTON_BITS, build_nodes, csr_apply, evaluate, node_boxes, node_geometry,
+                   node_moments, subset_order)
+
+# The FFT preconditioner in single precision (off: at 1/128 it cost 5 % more CG iterations
+# and saved no measurable time on the shared 2-core machine). Only the preconditioner:
+# residuals, operator and iterates stay double.
+PRECOND_SINGLE = False
+PRECOND_DTYPE = np.float32 if PRECOND_SINGLE else np.float64
+PRECOND_CDTYPE = np.complex64 if PRECOND_SINGLE else np.complex128
+# preconditioner codes
+PRE_NONE, PRE_DIAGONAL, PRE_FFT, PRE_STENCIL = 0, 1, 2, 3
+
+
+class FFTData(NamedTuple):
+    """Zero-padded convolution on the n x n grid (tfm.operators.FFTOperator)."""
+    n: int
+    spacing: float
+    cut2: float
+    diag: np.ndarray        # C_ii per spring
+    syms: object            # typed dict P -> symbol (shared with the operator)
+    isyms: object           # typed dict P -> inverse symbol
+    sym_full: np.ndarray    # symbol of the whole grid's box (the field u = C F)
+    src: np.ndarray         # work buffers of the whole-grid field
+    spec: np.ndarray
+    out: np.ndarray
+    threaded: bool          # spread large transforms over the Numba threads
+
+
+class DirectData(NamedTuple):
+    """Direct O(N_S^2) sums on any layout (tfm.operators.DirectOperator)."""
+    x: np.ndarray
+    y: np.ndarray
+    diag: np.ndarray
+    cut2: float             # 0 for the local kernel: no pair sums at all
+
+
+class TreeData(NamedTuple):
+    """Barnes-Hut sums of the 1/r kernel (tfm.tree_operator.TreeOperator). The g* arrays
+    are the target groups of all springs, built once (the field u = C F)."""
+    x: np.ndarray
+    y: np.ndarray
+    diag: np.ndarray
+    keys: np.ndarray        # Morton key per spring
+    order_all: np.ndarray   # all springs in Morton order
+    theta: float
+    order: int
+    leaf_size: int
+    group_size: int
+    gperm: np.ndarray
+    gtx: np.ndarray
+    gty: np.ndarray
+    gtidx: np.ndarray
+    gtdiag: np.ndarray
+    gstart: np.ndarray
+    gend: np.ndarray
+    gbox: np.ndarray
+
+
+class SparseData(NamedTuple):
+    """The local or truncated kernel as a neighbour list (CSR rows; empty rows for local)."""
+    indptr: np.ndarray
+    indices: np.ndarray
+    weights: np.ndarray
+    diag: np.ndarray
+
+
+class PreData(NamedTuple):
+    """The preconditioner: kind (PRE_*), its data, and for PRE_FFT the grid's symbols."""
+    kind: int
+    inv_diag: np.ndarray    # 1 / C_ii (PRE_DIAGONAL)
+    stencil: np.ndarray     # truncated inverse kernel (PRE_STENCIL)
+    n: int                  # grid side (PRE_FFT, PRE_STENCIL)
+    spacing: float
+    cut2: float
+    diag0: float
+    syms: object
+    isyms: object
+    threaded: bool
+
+
+def start_threads():
+    """Start Numba's thread pool, if not yet running. A cached kernel that calls a parallel
+    one does not start it when it is loaded from the disk cache (numba issue #8578), and
+    the first parallel loop then crashes the process; every ``compiled()`` calls this."""
+    numba.get_num_threads()
+
+
+# ---------------------------------------------------------------- symbols on a box
+SYMBOL_ARRAY = types.float64[:, ::1]
+PRECOND_ARRAY = types.Array(types.float32 if PRECOND_SINGLE else types.float64, 2, "C")
+
+
+@njit(**NUMBA_OPTS)
+def new_symbol_cache(P, sym):
+    """Empty typed dicts P -> symbol and P -> inverse symbol (with ``sym`` at P if P > 0).
+
+    Made in compiled code: filling a typed dict from Python compiles its methods anew in
+    every process (about 1.7 s of a 1/128 run's start-up)."""
+    syms = Dict.empty(key_type=types.int64, value_type=SYMBOL_ARRAY)
+    isyms = Dict.empty(key_type=types.int64, value_type=PRECOND_ARRAY)
+    if P > 0:
+        syms[P] = sym
+        isyms[P] = (1.0 / sym).astype(PRECOND_DTYPE)
+    return syms, isyms
+
+
+@njit(**NUMBA_OPTS)
+def box_symbols(syms, isyms, P, cut2, spacing, diag0):
+    """The symbol and its inverse for box size P, cached in the typed dicts."""
+    if P not in syms:
+        s = symbol(cut2, spacing, diag0, P)
+        syms[P] = s
+        isyms[P] = (1.0 / s).astype(PRECOND_DTYPE)
+    return syms[P], isyms[P]
+
+
+@njit(**NUMBA_OPTS)
+def box_apply_set(sym, idx, vals, n, i0, j0, h, box, spec, out, res, threaded):
+    """res = K vals on the springs idx of the box at (i0, j0), K given by its symbol."""
+    box[:h] = 0.0
+    for k in range(idx.size):
+        f = idx[k]
+        box[f // n - i0, f % n - j0] = vals[k]
+    convolve(box, 0, h, spec, out, sym, threaded)
+    for k in range(idx.size):
+        f = idx[k]
+        res[k] = out[f // n - i0, f % n - j0]
+
+
+@njit(**NUMBA_OPTS)
+def _fft_box(idx, n, syms, isyms, cut2, spacing, diag0):
+    """Bounding box of idx on the n x n grid, its FFT size P, symbol and inverse symbol."""
+    i0, j0, w, h = index_box(n, idx)
+    P = fast_len(2 * w - 1)
+    sym, isym = box_symbols(syms, isyms, P, cut2, spacing, diag0)
+    return i0, j0, w, h, P, sym, isym
+
+
+# ---------------------------------------------------------------- the operator
+def restrict(op, idx):
+    """The operator restricted to the contact set idx (compiled code only)."""
+    raise NotImplementedError
+
+
+def apply_set(op, ws, idx, vals, res):
+    """res = C_SS vals (compiled code only)."""
+    raise NotImplementedError
+
+
+def field(op, ws, idx, vals, u):
+    """u = C F on every spring, F = vals on idx and 0 elsewhere (compiled code only)."""
+    raise NotImplementedError
+
+
+# The FFT operator on the square grid: the contact's bounding box, zero-padded to P.
+def _fft_restrict(op, idx):
+    i0, j0, w, h, P, sym, isym = _fft_box(idx, op.n, op.syms, op.isyms, op.cut2, op.spacing, op.diag[0])
+    return (i0, j0, h, sym, np.zeros((w, w)), np.zeros((w, P // 2 + 1), dtype=np.complex128),
+            np.empty((w, P)))
+
+
+def _fft_apply(op, ws, idx, vals, res):
+    i0, j0, h, sym, box, spec, out = ws
+    box_apply_set(sym, idx, vals, op.n, i0, j0, h, box, spec, out, res, op.threaded)
+
+
+def _fft_field(op, ws, idx, vals, u):
+    field_on_grid(idx, vals, op.n, op.sym_full, op.src, op.spec, op.out, u, op.threaded)
+
+
+# The direct sums (tfm.operators.DirectOperator.apply: the same kernels, the same order).
+def _direct_restrict(op, idx):
+    return op.x[idx], op.y[idx]
+
+
+def _direct_apply(op, ws, idx, vals, res):
+    _direct(op, ws[0], ws[1], idx, vals, ws[0], ws[1], np.arange(idx.size), res)
+
+
+def _direct_field(op, ws, idx, vals, u):
+    _direct(op, ws[0], ws[1], idx, vals, op.x, op.y, idx, u)
+
+
+@njit(**NUMBA_OPTS)
+def _direct(op, xs, ys, idx, vals, xt, yt, self_at, out):
+    """out = C vals at the targets (xt, yt) from the sources (xs, ys) = springs idx, the
+    self term C_ii vals added at the target positions self_at."""
+    if op.cut2 > 0.0:
+        out[:] = _pair_sums(xs, ys, vals, xt, yt, op.cut2)
+    else:
+        out[:] = 0.0
+    for k in range(idx.size):
+        out[self_at[k]] += op.diag[idx[k]] * vals[k]
+
+
+# The Barnes-Hut tree (tfm.tree_operator.TreeOperator.evaluate: the same kernels).
+def _tree_restrict(op, idx):
+    # sources and targets are the same set: one Morton order, cut into leaves and groups
+    perm = subset_order(op.order_all, idx, op.x.size)
+    sidx = idx[perm]
+    keys = op.keys[sidx]
+    px, py = op.x[sidx], op.y[sidx]
+    start, end, skip, parent, leaf = build_nodes(keys, op.leaf_size, MORTON_BITS)
+    geo = node_geometry(node_boxes(start, end, parent, leaf, px, py))
+    ts, te, _, tp, tl = build_nodes(keys, op.group_size, MORTON_BITS)
+    tbox = node_boxes(ts, te, tp, tl, px, py)
+    groups = np.flatnonzero(tl)
+    gbox = np.empty((groups.size, 4))
+    for g in range(groups.size):
+        gbox[g] = tbox[groups[g]]
+    return perm, sidx, px, py, start, end, skip, leaf, geo, ts[groups], te[groups], gbox, op.diag[sidx]
+
+
+def _tree_apply(op, ws, idx, vals, res):
+    perm, sidx, px, py, start, end, skip, leaf, geo, gstart, gend, gbox, tdiag = ws
+    pf = vals[perm]
+    mom = node_moments(start, end, skip, leaf, geo, px, py, pf, op.order)
+    res[perm] = evaluate(start, end, skip, leaf, geo, mom, op.order, op.theta, px, py, pf,
+                         gstart, gend, gbox, px, py, tdiag * pf)
+
+
+def _tree_field(op, ws, idx, vals, u):
+    perm, sidx, px, py, start, end, skip, leaf, geo, gstart, gend, gbox, tdiag = ws
+    if idx.size == 0:
+        u[:] = 0.0
+        return
+    pf = vals[perm]
+    mom = node_moments(start, end, skip, leaf, geo, px, py, pf, op.order)
+    ffull = np.zeros(op.x.size)
+    ffull[sidx] = pf
+    u[op.gperm] = evaluate(start, end, skip, leaf, geo, mom, op.order, op.theta, px, py, pf,
+                           op.gstart, op.gend, op.gbox, op.gtx, op.gty, op.gtdiag * ffull[op.gtidx])
+
+
+# The neighbour list (tfm.tree_operator.TreeOperator.apply for the local and truncated
+# kernels); the workspace is a zeroed force field on every spring.
+def _sparse_restrict(op, idx):
+    return np.zeros(op.diag.size)
+
+
+def _sparse_apply(op, ws, idx, vals, res):
+    ws[idx] = vals
+    res[:] = csr_apply(op.indptr, op.indices, op.weights, op.diag, ws, idx)
+    ws[idx] = 0.0
+
+
+def _sparse_field(op, ws, idx, vals, u):
+    ws[idx] = vals
+    u[:] = csr_apply(op.indptr, op.indices, op.weights, op.diag, ws, np.arange(op.diag.size))
+    ws[idx] = 0.0
+
+
+# Which implementation, by the type of the operator's data (read when Numba compiles).
+_IMPLS = {FFTData: (_fft_restrict, _fft_apply, _fft_field),
+          DirectData: (_direct_restrict, _direct_apply, _direct_field),
+          TreeData: (_tree_restrict, _tree_apply, _tree_field),
+          SparseData: (_sparse_restrict, _sparse_apply, _sparse_field)}
+
+
+def _impl(op, which):
+    impls = _IMPLS.get(getattr(op, "instance_class", None))
+    return None if impls is None else impls[which]
+
+
+overload(restrict, jit_options=NUMBA_OPTS)(lambda op, idx: _impl(op, 0))
+overload(apply_set, jit_options=NUMBA_OPTS)(lambda op, ws, idx, vals, res: _impl(op, 1))
+overload(field, jit_options=NUMBA_OPTS)(lambda op, ws, idx, vals, u: _impl(op, 2))
+
+
+@njit(**NUMBA_OPTS)
+def field_on_grid(idx, vals, n, sym_full, src, spec, out, u, threaded):
+    """u = C F on the whole n x n grid for forces vals on the springs idx (F = 0 elsewhere).
+
+    The box is the grid itself (width n, P = sym_full.shape[0]); only the rows holding
+    sources are transformed forward."""
+    u[:] = 0.0
+    if idx.size == 0:
+        return
+    r0 = idx[0] // n
+    r1 = idx[idx.size - 1] // n + 1
+    src[r0:r1] = 0.0
+    for k in range(idx.size):
+        src[idx[k] // n, idx[k] % n] = vals[k]
+    convolve(src, r0, r1, spec, out, sym_full, threaded)
+    for i in range(n):
+        for j in range(n):
+            u[i * n + j] = out[i, j]
+
+
+# ---------------------------------------------------------------- the preconditioner
+@njit(**NUMBA_OPTS)
+def restrict_pre(pre, idx):
+    """M restricted to idx: for PRE_FFT the box's inverse symbol and transform buffers
+    (in the preconditioner's precision); empty for the others."""
+    if pre.kind == PRE_FFT:
+        i0, j0, w, h, P, sym, isym = _fft_box(idx, pre.n, pre.syms, pre.isyms, pre.cut2,
+                                              pre.spacing, pre.diag0)
+        return (i0, j0, h, isym, np.zeros((w, w), dtype=isym.dtype),
+                np.zeros((w, P // 2 + 1), dtype=PRECOND_CDTYPE), np.empty((w, P), dtype=isym.dtype))
+    isym = np.zeros((1, 1), dtype=PRECOND_DTYPE)
+    return (0, 0, 0, isym, isym.copy(), np.zeros((1, 1), dtype=PRECOND_CDTYPE), isym.copy())
+
+
+@njit(**NUMBA_OPTS)
+def precondition(pre, pws, idx, r, z):
+    """z = M r on the contact set idx."""
+    if pre.kind == PRE_FFT:
+        i0, j0, h, isym, box, spec, out = pws
+        box_apply_set(isym, idx, r, pre.n, i0, j0, h, box, spec, out, z, pre.threaded)
+    elif pre.kind == PRE_DIAGONAL:
+        for k in range(idx.size):
+            z[k] = pre.inv_diag[idx[k]] * r[k]
+    elif pre.kind == PRE_STENCIL:
+        z[:] = stencil_apply(idx // pre.n, idx % pre.n, r, pre.n, pre.stencil)
+    else:
+        z[:] = r
