@@ -204,3 +204,34 @@ def test_limit_where_and_max_ratio_select_runs_in_both_campaigns():
         assert only[g] == want and want
     with pytest.raises(CampaignError, match="self_term"):
         select_limit_runs(specs, None, ["self_term=9"])
+
+
+def test_kept_points_refit_without_run_files_and_are_not_computed_again(tmp_path):
+    """The committed points table stands in for run files that are not here: a refit from
+    it alone finds every point, writes the table back unchanged (exact floats), and a
+    `tfm limit` over runs that have a kept point computes none of them. A row whose run id
+    the campaign no longer lists is dropped."""
+    import shutil
+
+    import pandas as pd
+
+    from tfm.cli import main
+    from tfm.paper.limit import POINTS_FILE
+
+    committed = Path(__file__).parents[1] / "results" / "limit" / POINTS_FILE
+    out, results = tmp_path / "limit", tmp_path / "results"
+    out.mkdir()
+    shutil.copy(committed, out / POINTS_FILE)
+    kept = pd.read_csv(committed, dtype={"run_id": str}, keep_default_na=False)
+    stale = kept.iloc[:1].assign(run_id="0000000000000000")
+    pd.concat([kept, stale]).to_csv(out / POINTS_FILE, index=False)
+
+    assert main(["limit", "--where", "self_term=3.8", "--max-ratio", "9", "--results-dir", str(results),
+                 "--out", str(out), "-q"]) == 0
+    assert not list(results.glob("*/runs/*"))             # nothing computed: both runs are kept
+    text = (out / "REPORT.md").read_text()
+    assert "0 runs computed now" in text and f"{len(kept)} from report" in text
+    again = pd.read_csv(out / POINTS_FILE, dtype={"run_id": str}, keep_default_na=False)
+    key = ["geometry", "run_id"]
+    pd.testing.assert_frame_equal(again.sort_values(key).reset_index(drop=True),
+                                  kept.sort_values(key).reset_index(drop=True))

@@ -76,6 +76,50 @@ def stored_points(geometry: str, spec, results_dir: Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+# The points are kept with the report: every stored run's fit inputs, one row per run at
+# full precision, keyed by run id (which names the run's whole parameter record). A later
+# `tfm limit` takes a kept point for a run whose file is not in its results folder (a new
+# clone, another machine) instead of computing the run again, so a campaign of many hours
+# can be finished over several sittings and refitted from the table alone.
+POINTS_FILE = "points.csv"
+POINT_COLUMNS = ("geometry", "run_id", "self_term", "spacing", "ratio", "max_indent", "step", "F_max", "y",
+                 "step_bound", "wall_time", "warnings", "source")
+
+
+def kept_points(path: Path, specs: dict) -> pd.DataFrame:
+    """The kept points of ``path`` whose run ids the campaigns still list (others are
+    dropped: the campaign changed), with their coefficients recomputed from F_max."""
+    if not path.exists():
+        return pd.DataFrame(columns=POINT_COLUMNS)
+    kept = pd.read_csv(path, dtype={"run_id": str, "warnings": str, "source": str},
+                       keep_default_na=False, na_values=[""])
+    missing = set(POINT_COLUMNS) - set(kept.columns)
+    if missing:
+        raise ValueError(f"{path}: not a points table of tfm limit (missing {sorted(missing)})")
+    runs = {run.run_id: (geometry, run) for geometry, spec in specs.items() for run in spec.runs}
+    rows = []
+    for row in kept.to_dict("records"):
+        if row["run_id"] in runs and runs[row["run_id"]][0] == row["geometry"]:
+            p = runs[row["run_id"]][1].params
+            row.update(ratio=spec_ratio(p), y=coefficient(p, row["F_max"]), warnings=row["warnings"] or "")
+            rows.append(row)
+    return pd.DataFrame(rows, columns=POINT_COLUMNS)
+
+
+def merge_points(stored: pd.DataFrame, kept: pd.DataFrame) -> pd.DataFrame:
+    """Stored runs first; a kept point only where its run is not stored here."""
+    stored = stored.assign(source="run file") if len(stored) else pd.DataFrame(columns=POINT_COLUMNS)
+    extra = kept[~kept["run_id"].isin(stored["run_id"])] if len(kept) else kept
+    frames = [f for f in (stored, extra) if len(f)]
+    return pd.concat(frames, ignore_index=True)[list(POINT_COLUMNS)] if frames else pd.DataFrame(columns=POINT_COLUMNS)
+
+
+def write_points(path: Path, points: pd.DataFrame) -> None:
+    """The points table (pandas writes each float as its shortest exact repr)."""
+    points[list(POINT_COLUMNS)].sort_values(["geometry", "self_term", "spacing", "max_indent"], ascending=[True, True, False, True]) \
+        .to_csv(path, index=False)
+
+
 def split_preloads(points: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(points at the campaign's main, shallowest preload; preload-independence pairs)."""
     if points.empty:
@@ -321,10 +365,14 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
         "## Run",
         "",
         f"- this `make limit`: {wall / 60:.1f} min wall with `--jobs {jobs}`, {computed} runs computed now; "
-        f"the {len(points)} stored runs' own compute time adds up to {run_seconds / 60:.1f} min.",
+        f"the {len(points)} runs' own compute time adds up to {run_seconds / 60:.1f} min.",
+        "- points: " + ", ".join(f"{n} from {src}" for src, n in
+                                 (points["source"].value_counts().items() if len(points) else [])) +
+        f" (every point, at full precision: [{POINTS_FILE}]({POINTS_FILE}); `make limit` computes only the "
+        "runs it lacks).",
         f"- machine: {m['nproc']} cores, {m['cpu']}; load average {start_load:.1f} at the start and "
         f"{m['load'][0]:.1f} at the end (shared machine: times are pessimistic).",
-        "- runs stored / in the campaign: " + ", ".join(
+        "- runs with a point / in the campaign: " + ", ".join(
             f"{g} {len(spec.runs) - pending[g]}/{len(spec.runs)}" for g, spec in specs.items()) + ".",
     ]
     if any(pending.values()):
@@ -393,12 +441,13 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
               "## Every point", ""]
     if len(points):
         tab = points.sort_values(["geometry", "self_term", "ratio", "max_indent"])[
-            ["geometry", "self_term", "spacing", "ratio", "max_indent", "F_max", "y", "step_bound", "wall_time", "warnings"]]
+            ["geometry", "self_term", "spacing", "ratio", "max_indent", "F_max", "y", "step_bound", "wall_time", "warnings",
+             "source"]]
         tab = tab.assign(spacing=[fraction_text(s) for s in tab["spacing"]],
                          step_bound=[f"{100 * b:.2f} %" for b in tab["step_bound"]])
         lines += [md_table(tab.rename(columns={"ratio": "a/Δ", "y": "y (coefficient)", "wall_time": "run s"})), ""]
     lines += ["## Reproduce", "", "```", "make limit JOBS=2      # tfm limit --jobs 2: runs, resumes, fits, writes this file",
-              "tfm limit --analyse-only   # refit and rewrite from the runs stored so far", "```", ""]
+              f"tfm limit --analyse-only   # refit and rewrite from the runs stored so far and {POINTS_FILE}", "```", ""]
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "REPORT.md").write_text("\n".join(lines) + "\n")
     summary["pending"] = pending
@@ -459,15 +508,22 @@ def main_limit(args) -> int:
     results_dir = Path(args.results_dir)
     specs = {geometry: load_spec_for(stem) for geometry, stem in LIMIT_CAMPAIGNS}
     computed = 0
+    out_dir = Path(args.out)
+    kept = kept_points(out_dir / POINTS_FILE, specs)
     only = select_limit_runs(specs, args.max_ratio, args.where)
     if not args.analyse_only:
+        # a run with a kept point is not computed again
+        wanted = only or {g: {r.run_id for r in spec.runs} for g, spec in specs.items()}
+        only = {g: ids - set(kept["run_id"]) for g, ids in wanted.items()}
         done = run_specs(specs, args.jobs, results_dir, quiet=args.quiet, only=only)
         computed = sum(n for _, n in done.values())
     frames = [stored_points(g, spec, results_dir) for g, spec in specs.items()]
-    points = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()
+    stored = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()
+    points = merge_points(stored, kept)
     results = fit_all(points) if len(points) else []
-    out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
+    if len(points):
+        write_points(out_dir / POINTS_FILE, points)
     if results:
         plot_limit(results, out_dir / "limit.png")
     wall = time.perf_counter() - t0
