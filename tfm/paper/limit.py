@@ -91,8 +91,7 @@ def kept_points(path: Path, specs: dict) -> pd.DataFrame:
     dropped: the campaign changed), with their coefficients recomputed from F_max."""
     if not path.exists():
         return pd.DataFrame(columns=POINT_COLUMNS)
-    kept = pd.read_csv(path, dtype={"run_id": str, "warnings": str, "source": str},
-                       keep_default_na=False, na_values=[""])
+    kept = pd.read_csv(path, dtype={"run_id": str, "warnings": str, "source": str}, keep_default_na=False)
     missing = set(POINT_COLUMNS) - set(kept.columns)
     if missing:
         raise ValueError(f"{path}: not a points table of tfm limit (missing {sorted(missing)})")
@@ -101,7 +100,7 @@ def kept_points(path: Path, specs: dict) -> pd.DataFrame:
     for row in kept.to_dict("records"):
         if row["run_id"] in runs and runs[row["run_id"]][0] == row["geometry"]:
             p = runs[row["run_id"]][1].params
-            row.update(ratio=spec_ratio(p), y=coefficient(p, row["F_max"]), warnings=row["warnings"] or "")
+            row.update(ratio=spec_ratio(p), y=coefficient(p, row["F_max"]))
             rows.append(row)
     return pd.DataFrame(rows, columns=POINT_COLUMNS)
 
@@ -368,7 +367,7 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
         f"the {len(points)} runs' own compute time adds up to {run_seconds / 60:.1f} min.",
         "- points: " + ", ".join(f"{n} from {src}" for src, n in
                                  (points["source"].value_counts().items() if len(points) else [])) +
-        f" (every point, at full precision: [{POINTS_FILE}]({POINTS_FILE}); `make limit` computes only the "
+        f" (one row per run, with its source: [{POINTS_FILE}]({POINTS_FILE}); `make limit` computes only the "
         "runs it lacks).",
         f"- machine: {m['nproc']} cores, {m['cpu']}; load average {start_load:.1f} at the start and "
         f"{m['load'][0]:.1f} at the end (shared machine: times are pessimistic).",
