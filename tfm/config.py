@@ -48,3 +48,7 @@ def fft_workers() -> int:
         return max(1, int(value)) if value else (os.cpu_count() or 1)
     except ValueError:
         return 1
+
+# Seconds between checkpoints of a running curve (tfm.checkpoint): at most this much of a
+# run is computed again after a crash; a save of a 1/1340 state takes well under a second.
+CHECKPOINT_EVERY = 600.0

@@ -19,7 +19,8 @@
   is resolved to ``load_step / 2**JUMP_BISECTIONS``, not to ``load_step``.
 
 Every recorded step is passed to ``observe(state, record)`` (progress bars, field
-snapshots). Nothing here writes files.
+snapshots). Files are written only through ``observe`` and a checkpoint passed in
+(tfm.checkpoint: a displacement-controlled run continues from its last saved step).
 """
 from __future__ import annotations
 
@@ -37,13 +38,17 @@ JUMP_BISECTIONS = 10
 Observer = Callable[[ContactState, StepRecord], None]
 
 
-def run(p, prob: Problem, observe: Observer | None = None) -> CurveResult:
-    """The protocol named by ``p.control`` (a validated tfm.Params)."""
+def run(p, prob: Problem, observe: Observer | None = None, checkpoint=None) -> CurveResult:
+    """The protocol named by ``p.control`` (a validated tfm.Params). ``checkpoint`` (a
+    tfm.checkpoint.Checkpoint, displacement control only) saves the state as the curve goes
+    and continues from a saved state."""
     n_load = n_loading_steps(p)
     max_unload = p.max_unload_steps or (20 * n_load + 1000)
     if p.control == "force":
+        if checkpoint is not None:
+            raise ValueError("checkpoint: force control is not checkpointed")
         return force_control(prob, p.peak_load, p.load_decrement, p.step, max_unload, observe)
-    return displacement_control(prob, p.delta_max, p.step, max_unload, observe)
+    return displacement_control(prob, p.delta_max, p.step, max_unload, observe, checkpoint)
 
 
 def n_loading_steps(p) -> int:
@@ -53,27 +58,44 @@ def n_loading_steps(p) -> int:
 
 
 def displacement_control(prob: Problem, delta_max: float, step: float, max_unload_steps: int,
-                         observe: Observer | None = None) -> CurveResult:
+                         observe: Observer | None = None, checkpoint=None) -> CurveResult:
     """Load from d = 0 to d = -delta_max in steps of ``step``, then unload until no spring
-    is in contact (or max_unload_steps is reached, which is flagged)."""
+    is in contact (or max_unload_steps is reached, which is flagged). With a checkpoint,
+    the state is saved after finished steps, and a saved state is continued from."""
     out = CurveResult()
     t0 = time.perf_counter()
     state = ContactState(prob)
     n_load = int(np.ceil(delta_max / step - 1e-9))
-    k = 0
-    for j in range(1, n_load + 1):
+    first = {"load": 1, "unload": 1}
+    before = 0.0                         # compute time of the run before it was resumed
+    saved = checkpoint.load() if checkpoint is not None else None
+    if saved is not None:
+        state.restore(saved.carried)
+        out, before = saved.out, saved.elapsed
+        first[saved.phase] = saved.j + 1
+        if saved.phase == "unload":
+            first["load"] = n_load + 1
+
+    def done(phase, j):
+        if checkpoint is not None:
+            checkpoint.step_done(state, out, phase, j, before + time.perf_counter() - t0)
+
+    k = len(out.steps)
+    for j in range(first["load"], n_load + 1):
         rec = state.advance(-min(j * step, delta_max), k, "load", out)
         _record(out, state, rec, observe)
         k += 1
+        done("load", j)
     out.unload_complete = False
-    for j in range(1, max_unload_steps + 1):
+    for j in range(first["unload"], max_unload_steps + 1):
         rec = state.advance(-delta_max + j * step, k, "unload", out)
         _record(out, state, rec, observe)
         k += 1
         if rec.n_contact == 0:
             out.unload_complete = True
             break
-    out.wall_time = time.perf_counter() - t0
+        done("unload", j)
+    out.wall_time = before + time.perf_counter() - t0
     return out
 
 

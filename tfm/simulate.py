@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 
+from .checkpoint import CHECKPOINT_EVERY, Checkpoint
 from .geometry import heights, make_layout
 from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
@@ -35,19 +36,25 @@ def build_problem(p: Params) -> tuple[Problem, object]:
     return prob, layout
 
 
-def simulate(p: Params | None = None, *, progress=None, fields_path=None, **overrides) -> RunResult:
+def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkpoint=None,
+             checkpoint_every: float = CHECKPOINT_EVERY, **overrides) -> RunResult:
     """Run the loading protocol of ``p.control`` (tfm.protocol). ``simulate(spacing=1/64,
     k_th=0.02)`` and ``simulate(Params(...))`` both work. Suspect results carry flags and warn.
 
     ``progress(record)`` is called after every step. With ``p.snapshots`` other than
     "none" the field snapshots stream to ``fields_path`` (NetCDF4, tfm.snapshots); without
-    a path they go to a temporary file that ``RunResult.write_curve`` moves beside the curve."""
+    a path they go to a temporary file that ``RunResult.write_curve`` moves beside the curve.
+
+    ``checkpoint`` (a file path, displacement control without snapshots): the run's state
+    is saved there every ``checkpoint_every`` seconds, a saved state of this run is
+    continued from (same curve, bit for bit), and the file is removed when the run ends."""
     from . import protocol
 
     if p is None:
         p = Params.from_dict(overrides) if overrides else Params()
     elif overrides:
         p = p.replace(**overrides)
+    ckpt = _checkpoint(p, checkpoint, checkpoint_every) if checkpoint is not None else None
     notes = check(p)                   # refuses a meaningless or oversized run up front
     for note in notes:
         warnings.warn(f"run {p.run_id}: {note}", RunWarning, stacklevel=2)
@@ -69,7 +76,7 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, **over
             progress(rec)
 
     try:
-        out = protocol.run(q, prob, observe)
+        out = protocol.run(q, prob, observe, ckpt)
         curve = curve_frame(out.steps)
         summary = summarize(curve, out, q, layout.n, layout.shape[0] if layout.shape else None)
         if p.units == "si":
@@ -85,7 +92,28 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, **over
         raise
     if summary["warnings"]:
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
+    # a resumed run says so: the steps before this one were computed by an earlier process
+    prov["resumed_at_step"] = (ckpt.resumed_at or 0) if ckpt is not None else 0
+    if ckpt is not None:
+        ckpt.remove()
     res = RunResult(p, curve, summary, prov)
     if writer is not None:
         res.fields_path = writer.path
     return res
+
+
+def _checkpoint(p: Params, path, every: float) -> Checkpoint:
+    """The run's checkpoint, refused before any computation where it cannot serve."""
+    if p.control != "displacement":
+        raise ValueError(f"checkpoint: only displacement-controlled runs are checkpointed, this one "
+                         f"has control = {p.control!r}")
+    if p.snapshots != "none":
+        raise ValueError(f"checkpoint: runs with field snapshots (snapshots = {p.snapshots!r}) are "
+                         "not checkpointed: the snapshot stream cannot be resumed")
+    ckpt = Checkpoint(path, p.run_id, every)
+    try:
+        ckpt.path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"checkpoint: cannot write the folder {ckpt.path.parent}: "
+                         f"{exc.strerror or exc}") from None
+    return ckpt

@@ -120,6 +120,26 @@ class ContactState:
         self._f_th = np.ascontiguousarray(prob.f_th, dtype=float)
         self._snap_rounds = self._solve_on_set = None    # compiled entry points (entry_point)
 
+    # What a later step reads besides the problem: saved and restored by tfm.checkpoint.
+    CARRIED = ("contact", "F", "u", "_slope", "_uslope", "_last_d", "_set_id", "_base", "_unit",
+               "_unit_set")
+
+    def carried(self) -> dict:
+        """The state a later step reads (arrays, numbers, tuples of them, or None)."""
+        return {name: getattr(self, name) for name in self.CARRIED}
+
+    def restore(self, carried: dict) -> None:
+        """Continue from ``carried()`` of a state of the same problem."""
+        missing = set(self.CARRIED) - set(carried)
+        if missing:
+            raise ValueError(f"restore: the saved state lacks {sorted(missing)}")
+        for name in ("contact", "F", "u"):
+            if carried[name].shape != getattr(self, name).shape:
+                raise ValueError(f"restore: {name} has shape {carried[name].shape}, the problem "
+                                 f"{getattr(self, name).shape}")
+        for name in self.CARRIED:
+            setattr(self, name, carried[name])
+
     @property
     def threaded(self) -> bool:
         """Whether the large transforms are spread over the Numba threads (same bits)."""

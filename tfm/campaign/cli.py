@@ -33,6 +33,7 @@ def register(subparsers) -> None:
     run.add_argument("--where", action="append", default=[], metavar="KEY=VALUE",
                      help="compute only the runs with this parameter value, e.g. self_term=3.8 or "
                           "spacing=1/1340 (repeat to combine); the rest stay pending")
+    checkpoint_flag(run)
     _max_runs_flag(run)
     run.set_defaults(func=cmd_run)
 
@@ -56,6 +57,16 @@ def register(subparsers) -> None:
     expand.set_defaults(func=cmd_expand)
 
 
+def checkpoint_flag(parser) -> None:
+    from ..config import CHECKPOINT_EVERY
+
+    parser.add_argument("--checkpoint-every", type=float, default=CHECKPOINT_EVERY, metavar="SECONDS",
+                        help="save a running curve's state this often, in <results>/<name>/checkpoints/, "
+                             f"so that a killed run continues from there (default {CHECKPOINT_EVERY:g})")
+    parser.add_argument("--no-checkpoints", dest="checkpoint_every", action="store_const", const=None,
+                        help="save no checkpoints (a killed run starts again from its first step)")
+
+
 def _max_runs_flag(parser) -> None:
     parser.add_argument("--max-runs", type=int, default=None, metavar="N",
                         help="confirm a campaign of more than 10,000 runs (as max_runs = N in the file)")
@@ -71,7 +82,8 @@ def cmd_run(args) -> int:
     only = {r.run_id for r in select_runs(spec, args.where)} if args.where else None
     root = run_campaign(spec, jobs=args.jobs, scheduler=args.scheduler, quiet=args.quiet,
                         results_dir=args.results_dir, retry_failed=not args.skip_failed,
-                        rerun_stale=args.rerun_stale, only=only)
+                        rerun_stale=args.rerun_stale, only=only,
+                        checkpoint_every=args.checkpoint_every)
     status = CampaignStore(root).status(spec)
     if status.flagged and not args.quiet:
         print(f"{len(status.flagged)} runs are flagged (see the r_warnings column of "
@@ -97,6 +109,9 @@ def cmd_status(args) -> int:
           f"{len(st.pending)} pending, {len(st.failed)} failed"
           + (f", {len(st.stale)} computed by other tfm code (--rerun-stale)" if st.stale else "")
           + f"  [{store.root}]")
+    saved = _checkpoints(store, st.pending + st.failed)
+    if saved:
+        print(f"  {len(saved)} unfinished runs have a checkpoint: they continue from it")
     state = {**{r: "pending" for r in st.pending}, **{r: "done" for r in st.done},
              **{r: "flagged" for r in st.flagged}, **{r: "failed" for r in st.failed}}
     for run in spec.runs:
@@ -105,8 +120,27 @@ def cmd_status(args) -> int:
             line = f"  {run.index:4d} {rid} {state[rid]:8s} {_swept(run)}"
             if state[rid] == "failed":
                 line += f"  {(store.read_failure(rid) or {}).get('error', '')}"
+            if rid in saved:
+                line += f"  [{saved[rid]}]"
             print(line)
     return 1 if st.failed else 0
+
+
+def _checkpoints(store, run_ids) -> dict[str, str]:
+    """run id -> what its checkpoint holds, for the runs in ``run_ids`` that have one."""
+    if not store.checkpoints_dir.is_dir():
+        return {}
+    from ..checkpoint import read_meta
+
+    saved = {}
+    for rid in run_ids:
+        path = store.checkpoint_path(rid)
+        if path.exists():
+            meta = read_meta(path) or {}
+            saved[rid] = (f"checkpoint: {meta.get('steps', '?')} steps, "
+                          f"{float(meta.get('elapsed', float('nan'))) / 60:.1f} min, "
+                          f"written {meta.get('written_at', '?')}")
+    return saved
 
 
 def cmd_list(args) -> int:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
+from ..config import CHECKPOINT_EVERY
 from .spec import CampaignError, CampaignSpec, Run, load_spec
 from .store import CampaignStore
 
@@ -46,7 +47,8 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
 
 def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = False,
                  results_dir: str | os.PathLike = "results", retry_failed: bool = True,
-                 rerun_stale: bool = False, only=None) -> Path:
+                 rerun_stale: bool = False, only=None,
+                 checkpoint_every: float | None = CHECKPOINT_EVERY) -> Path:
     """Run every run of a campaign that is not stored yet; return ``results_dir/<name>``.
 
     ``jobs`` > 1 uses a local process pool; ``scheduler`` (an address such as
@@ -56,10 +58,19 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
     tfm version or commit are kept (with a warning) unless ``rerun_stale=True``: the run id
     hashes the parameters, not the code. ``only`` (run ids, e.g. from select_runs) limits
     what is computed now; the campaign tables still cover every stored run.
+
+    On this machine (serial or process pool) a displacement-controlled run without field
+    snapshots saves its state every ``checkpoint_every`` seconds in ``checkpoints/``
+    (tfm.checkpoint; None: never, 0: after every step): after a crash it continues from
+    there, not from its first step. Dask workers may not share this file system, so they do not checkpoint.
     """
     spec = spec_or_path if isinstance(spec_or_path, CampaignSpec) else load_spec(spec_or_path)
     if not isinstance(jobs, int) or jobs < 1:
         raise CampaignError(f"jobs: must be a whole number >= 1, got {jobs!r}")
+    if checkpoint_every is not None and not (isinstance(checkpoint_every, (int, float))
+                                             and not isinstance(checkpoint_every, bool) and checkpoint_every >= 0):
+        raise CampaignError(f"checkpoint-every: must be a number of seconds >= 0 (or None: no "
+                            f"checkpoints), got {checkpoint_every!r}")
     store = CampaignStore.for_spec(spec, results_dir)
     with store.lock():
         store.claim(spec)
@@ -86,12 +97,13 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
                 print(f"warning: campaign {spec.name}: {len(noted) - 3} more runs with such notes "
                       "(they are flagged in the summary)", file=sys.stderr)
         if todo:
+            ckpt = None if checkpoint_every is None else (store.checkpoints_dir, float(checkpoint_every))
             if scheduler is not None:
                 outcomes = _run_dask(todo, scheduler)
             elif jobs > 1 and len(todo) > 1:
-                outcomes = _run_pool(todo, jobs)
+                outcomes = _run_pool(todo, jobs, ckpt)
             else:
-                outcomes = _run_serial(todo)
+                outcomes = _run_serial(todo, ckpt)
             _consume(spec, store, todo, outcomes, skipped=len(status.done), quiet=quiet)
         store.write_tables(spec)
     return store.root
@@ -146,8 +158,9 @@ def _progress(name: str, total: int, quiet: bool):
 
 
 # ---- the work of one run (runs in a worker) ----------------------------------
-def execute(params, executor: str = "serial") -> Outcome:
-    """Simulate one run; never raises, so one bad run cannot stop the campaign."""
+def execute(params, executor: str = "serial", ckpt=None) -> Outcome:
+    """Simulate one run; never raises, so one bad run cannot stop the campaign. ``ckpt``:
+    (folder, seconds) of the run's checkpoint, for the runs that can have one."""
     try:
         import numba
 
@@ -156,12 +169,19 @@ def execute(params, executor: str = "serial") -> Outcome:
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RunWarning)   # the flags are in the summary
-            result = simulate(params)
+            result = simulate(params, **_checkpoint_args(params, ckpt))
         result.provenance.update(numba_threads=numba.get_num_threads(), fft_workers=fft_workers(),
                                  executor=executor)
         return Outcome(result=result)
     except Exception as exc:
         return Outcome(error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc())
+
+
+def _checkpoint_args(params, ckpt) -> dict:
+    if ckpt is None or params.control != "displacement" or params.snapshots != "none":
+        return {}
+    folder, every = ckpt
+    return {"checkpoint": Path(folder) / f"{params.run_id}.npz", "checkpoint_every": every}
 
 
 def _set_threads(threads: int, set_env: bool = True) -> None:
@@ -180,9 +200,9 @@ def _failure(exc: BaseException) -> Outcome:
 
 
 # ---- executors: each yields (run, outcome) as runs finish --------------------
-def _run_serial(todo: list[Run]) -> Iterator[tuple[Run, Outcome]]:
+def _run_serial(todo: list[Run], ckpt=None) -> Iterator[tuple[Run, Outcome]]:
     for run in todo:
-        yield run, execute(run.params, "serial")
+        yield run, execute(run.params, "serial", ckpt)
 
 
 _STARTED = None          # in a pool worker: the queue on which it says what it runs
@@ -212,12 +232,12 @@ def _die_with_parent() -> None:
         os._exit(1)
 
 
-def _pool_execute(run_id: str, params, executor: str) -> Outcome:
+def _pool_execute(run_id: str, params, executor: str, ckpt=None) -> Outcome:
     """``execute`` in a pool worker, which first tells the parent which run it took, so
     that a worker killed mid-run (out of memory, SIGKILL) costs that run only."""
     if _STARTED is not None:
         _STARTED.put((os.getpid(), run_id))
-    return execute(params, executor)
+    return execute(params, executor, ckpt)
 
 
 def _death(exitcode) -> str:
@@ -237,7 +257,7 @@ def _death(exitcode) -> str:
 MAX_UNPINNED = 3            # pool breakages in a row that no run can be blamed for
 
 
-def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
+def _run_pool(todo: list[Run], jobs: int, ckpt=None) -> Iterator[tuple[Run, Outcome]]:
     """Runs over a spawned process pool. A worker that dies fails its own run, with the
     cause; the pool is rebuilt and the other runs go on (those in flight are redone)."""
     import multiprocessing
@@ -253,7 +273,7 @@ def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
     unpinned = 0
     while remaining:
         pool, procs, futures = _start_pool(ctx, min(workers, len(remaining)), threads, started,
-                                           remaining.values())
+                                           remaining.values(), ckpt)
         running: dict[int, str] = {}              # worker pid -> the run it said it took
         broken = False
         try:
@@ -300,7 +320,7 @@ def _run_pool(todo: list[Run], jobs: int) -> Iterator[tuple[Run, Outcome]]:
                                  "without a run to blame; not run")
 
 
-def _start_pool(ctx, workers: int, threads: int, started, runs):
+def _start_pool(ctx, workers: int, threads: int, started, runs, ckpt=None):
     """A pool with its workers started; returns (pool, {pid: process}, {future: run})."""
     from concurrent.futures import ProcessPoolExecutor
 
@@ -312,7 +332,7 @@ def _start_pool(ctx, workers: int, threads: int, started, runs):
                                initargs=(threads, started))
     try:
         label = f"pool[{workers}x{threads}]"
-        futures = {pool.submit(_pool_execute, run.run_id, run.params, label): run for run in runs}
+        futures = {pool.submit(_pool_execute, run.run_id, run.params, label, ckpt): run for run in runs}
     finally:
         if saved is None:
             os.environ.pop("NUMBA_NUM_THREADS", None)

@@ -7,6 +7,8 @@ Layout under ``<results_dir>/<campaign name>/``::
     runs/<run_id>.fields.nc    its field snapshots (NetCDF4, tfm.snapshots), if the run
                                asked for them; summary column ``fields_path`` points to it
     failures/<run_id>.json     one failed run: parameters, error and traceback
+    checkpoints/<run_id>.npz   the saved state of a run in progress (tfm.checkpoint);
+                               removed when the run is stored
     summary.parquet            one row per finished run: run_id, status, p_*, r_*, prov_*
     curves.parquet             every step of every finished run, with run_id
     failures.parquet           one row per failed run: run_id, p_*, error, traceback
@@ -69,6 +71,7 @@ class CampaignStore:
         self.root = Path(root)
         self.runs_dir = self.root / "runs"
         self.failures_dir = self.root / "failures"
+        self.checkpoints_dir = self.root / "checkpoints"
 
     @classmethod
     def for_spec(cls, spec: CampaignSpec, results_dir: str | os.PathLike = "results") -> "CampaignStore":
@@ -79,6 +82,9 @@ class CampaignStore:
 
     def failure_path(self, run_id: str) -> Path:
         return self.failures_dir / f"{run_id}.json"
+
+    def checkpoint_path(self, run_id: str) -> Path:
+        return self.checkpoints_dir / f"{run_id}.npz"
 
     def table_path(self, table: str) -> Path:
         return self.root / f"{table}.parquet"
@@ -155,7 +161,7 @@ class CampaignStore:
     def clean_temporary(self) -> list[Path]:
         """Remove temporary files left by a killed writer (call with the lock held)."""
         removed = []
-        for folder in (self.root, self.runs_dir, self.failures_dir):
+        for folder in (self.root, self.runs_dir, self.failures_dir, self.checkpoints_dir):
             for tmp in folder.glob(".*.tmp"):
                 tmp.unlink(missing_ok=True)
                 removed.append(tmp)
@@ -189,6 +195,7 @@ class CampaignStore:
             result.fields_path = tmp
         path = result.write_curve(self.run_path(run.run_id))
         self.failure_path(run.run_id).unlink(missing_ok=True)
+        self.checkpoint_path(run.run_id).unlink(missing_ok=True)
         return path
 
     def write_failure(self, run: Run, error: str, trace: str) -> Path:

@@ -19,6 +19,8 @@ def add_paper_arguments(ap: argparse.ArgumentParser) -> None:
 
 
 def add_limit_arguments(ap: argparse.ArgumentParser) -> None:
+    from ..campaign.cli import checkpoint_flag
+
     ap.add_argument("-j", "--jobs", type=int, default=1, help="parallel runs (process pool); default 1")
     ap.add_argument("--max-ratio", type=float, default=None, metavar="N",
                     help="run only the points with a_c/Δ <= N (the rest stay pending; rerun without it to finish)")
@@ -27,6 +29,7 @@ def add_limit_arguments(ap: argparse.ArgumentParser) -> None:
                          "combine; with --max-ratio both apply)")
     ap.add_argument("--analyse-only", action="store_true",
                     help="run nothing: fit and report the points stored so far (safe while a campaign runs)")
+    checkpoint_flag(ap)
     ap.add_argument("--results-dir", default="results", help="campaign tables (default results)")
     ap.add_argument("--out", default="results/limit", help="figure and REPORT.md (default results/limit)")
     ap.add_argument("-q", "--quiet", action="store_true")

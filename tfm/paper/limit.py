@@ -514,7 +514,8 @@ def main_limit(args) -> int:
         # a run with a kept point is not computed again
         wanted = only or {g: {r.run_id for r in spec.runs} for g, spec in specs.items()}
         only = {g: ids - set(kept["run_id"]) for g, ids in wanted.items()}
-        done = run_specs(specs, args.jobs, results_dir, quiet=args.quiet, only=only)
+        done = run_specs(specs, args.jobs, results_dir, quiet=args.quiet, only=only,
+                         checkpoint_every=args.checkpoint_every)
         computed = sum(n for _, n in done.values())
     frames = [stored_points(g, spec, results_dir) for g, spec in specs.items()]
     stored = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()

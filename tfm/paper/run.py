@@ -95,10 +95,11 @@ def load_spec_for(stem: str, quick: bool = False):
 
 
 def run_specs(specs: dict, jobs: int, results_dir: Path, quiet: bool = False, order=None,
-              only: dict | None = None) -> dict[str, tuple[float, int]]:
+              only: dict | None = None, **campaign_options) -> dict[str, tuple[float, int]]:
     """Run (or resume) each campaign with ``tfm.campaign.run_campaign``, one after the
     other, each over ``jobs`` workers; ``only[key]`` (run ids) limits what is computed
-    now. Returns ``{key: (seconds, runs computed now)}``."""
+    now; ``campaign_options`` go to run_campaign (checkpoint_every). Returns
+    ``{key: (seconds, runs computed now)}``."""
     from ..campaign import CampaignStore, run_campaign
 
     out = {}
@@ -110,7 +111,7 @@ def run_specs(specs: dict, jobs: int, results_dir: Path, quiet: bool = False, or
             print(f"[tfm.paper] {spec.name}: {len(spec.runs)} runs, {stored} stored", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         run_campaign(spec, jobs=jobs, quiet=quiet, results_dir=results_dir,
-                     only=None if only is None else only.get(key, set()))
+                     only=None if only is None else only.get(key, set()), **campaign_options)
         out[key] = (time.perf_counter() - t0, len(store.status(spec).done) - stored)
     return out
 

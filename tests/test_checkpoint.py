@@ -1,0 +1,148 @@
+"""Checkpoints: a run stopped mid-curve continues from its last saved step, and ends with
+the curve of a run that was never stopped, bit for bit; a checkpoint that cannot serve is
+refused before any computation, or set aside with a warning."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import tfm.checkpoint
+import tfm.protocol
+from tfm import Params, simulate
+from tfm.campaign import CampaignError, CampaignStore, load_spec, load_tables, run_campaign
+from tfm.cli import main as tfm_main
+from tfm.simulate import RunWarning
+
+# 20 loading steps and about as many unloading ones: a second or two.
+SMOKE = Path(__file__).resolve().parents[1] / "campaigns" / "smoke.toml"
+P = Params(spacing=1 / 32, k_th=0.02, f_th=None, shape="paraboloid", max_indent=0.02, step=1e-3)
+N_LOAD = 20
+
+
+class Stop(Exception):
+    """Stands for a crash: raised from the progress callback after a recorded step."""
+
+
+def stop_after(steps: int):
+    def progress(rec):
+        if rec.step + 1 == steps:
+            raise Stop
+    return progress
+
+
+def assert_same_run(a, b) -> None:
+    """Same curve (every column; floats bit for bit) and same summary, but the wall time."""
+    assert list(a.curve.columns) == list(b.curve.columns) and len(a.curve) == len(b.curve)
+    for col in a.curve.columns:
+        x, y = a.curve[col].to_numpy(), b.curve[col].to_numpy()
+        if x.dtype.kind == "f":
+            assert (x.view(np.uint64) == y.view(np.uint64)).all(), col
+        else:
+            assert (x == y).all(), col
+    sa = {k: v for k, v in a.summary.items() if k != "wall_time"}
+    sb = {k: v for k, v in b.summary.items() if k != "wall_time"}
+    assert sa.keys() == sb.keys()
+    for k in sa:
+        assert sa[k] == sb[k] or (sa[k] != sa[k] and sb[k] != sb[k]), k    # NaN == NaN here
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return simulate(P)
+
+
+def test_a_run_stopped_twice_ends_with_the_uninterrupted_curve(reference, tmp_path):
+    """Stopped in the loading phase, resumed, stopped in the unloading phase, resumed: the
+    saved states (every step, checkpoint_every=0) carry everything a later step reads."""
+    assert len(reference.curve) > N_LOAD + 5
+    path = tmp_path / "run.npz"
+    with pytest.raises(Stop):
+        simulate(P, progress=stop_after(7), checkpoint=path, checkpoint_every=0)
+    # the 7th step raised before its save: the checkpoint holds 6 steps
+    assert tfm.checkpoint.read_meta(path)["steps"] == 6
+    with pytest.raises(Stop):
+        simulate(P, progress=stop_after(N_LOAD + 4), checkpoint=path, checkpoint_every=0)
+    meta = tfm.checkpoint.read_meta(path)
+    assert meta["steps"] == N_LOAD + 3 and meta["phase"] == "unload"
+    res = simulate(P, checkpoint=path, checkpoint_every=0)
+    assert res.provenance["resumed_at_step"] == N_LOAD + 3
+    assert not path.exists()              # a finished run leaves no checkpoint
+    assert_same_run(res, reference)
+    assert reference.provenance["resumed_at_step"] == 0
+
+
+def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path, monkeypatch):
+    path = tmp_path / "run.npz"
+    other = P.replace(alpha=0.5)
+    with pytest.raises(Stop):
+        simulate(other, progress=stop_after(5), checkpoint=path, checkpoint_every=0)
+    with pytest.warns(RunWarning, match=f"belongs to run '{other.run_id}'.*starts afresh"):
+        res = simulate(P, checkpoint=path)
+    assert res.provenance["resumed_at_step"] == 0
+    assert_same_run(res, reference)
+
+    with pytest.raises(Stop):
+        simulate(P, progress=stop_after(5), checkpoint=path, checkpoint_every=0)
+    monkeypatch.setattr(tfm.checkpoint, "_CODE_HASH", "another engine")
+    with pytest.warns(RunWarning, match="another version of tfm's source"):
+        res = simulate(P, checkpoint=path)
+    assert res.provenance["resumed_at_step"] == 0
+
+    path.write_bytes(b"not a checkpoint")
+    with pytest.warns(RunWarning, match="cannot be read"):
+        simulate(P, checkpoint=path)
+
+
+@pytest.mark.parametrize("changes, options, expected", [
+    ({"control": "force", "max_load": 0.01, "load_step": 1e-3, "max_indent": "auto"}, {}, "only displacement-controlled"),
+    ({"snapshots": 5}, {}, "field snapshots"),
+    ({}, {"checkpoint_every": -1.0}, "checkpoint_every: must be >= 0"),
+])
+def test_a_checkpoint_that_cannot_serve_is_refused_before_any_computation(tmp_path, monkeypatch,
+                                                                         changes, options, expected):
+    def no_work(*args, **kwargs):
+        raise AssertionError("computed")
+
+    monkeypatch.setattr(tfm.protocol, "run", no_work)
+    with pytest.raises(ValueError, match=expected):
+        simulate(P.replace(**changes), checkpoint=tmp_path / "run.npz", **options)
+    with pytest.raises(CampaignError, match="checkpoint-every"):
+        run_campaign(load_spec(SMOKE), results_dir=tmp_path, checkpoint_every=-1)
+
+
+def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, monkeypatch, capsys):
+    """The first run of the smoke campaign crashes after 10 steps (a failure is recorded,
+    its checkpoint stays); the next `campaign run` continues it from step 9 and the tables
+    equal those of an uninterrupted campaign."""
+    spec = load_spec(SMOKE)
+    clean = run_campaign(spec, quiet=True, results_dir=tmp_path / "clean")
+
+    record, calls = tfm.protocol._record, []
+
+    def crash_once(out, state, rec, observe):
+        record(out, state, rec, observe)
+        calls.append(rec.step)
+        if len(calls) == 10:
+            raise RuntimeError("simulated crash")
+
+    monkeypatch.setattr(tfm.protocol, "_record", crash_once)
+    root = run_campaign(spec, quiet=True, results_dir=tmp_path / "crashed", checkpoint_every=0)
+    monkeypatch.setattr(tfm.protocol, "_record", record)
+    store = CampaignStore(root)
+    first = spec.runs[0].run_id
+    assert store.status(spec).failed == [first]
+    assert store.checkpoint_path(first).exists()
+    assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path / "crashed")]) == 1
+    assert "1 unfinished runs have a checkpoint" in capsys.readouterr().out
+
+    run_campaign(spec, quiet=True, results_dir=tmp_path / "crashed", checkpoint_every=0)
+    assert not any(store.checkpoints_dir.iterdir())
+    summary, curves = load_tables(root)
+    ref_summary, ref_curves = load_tables(clean)
+    assert summary.set_index("run_id")["prov_resumed_at_step"].to_dict()[first] == 9
+    keep = [c for c in summary.columns if not c.startswith("prov_") and c != "r_wall_time"]
+    pd.testing.assert_frame_equal(summary[keep], ref_summary[keep], check_exact=True)
+    pd.testing.assert_frame_equal(curves, ref_curves, check_exact=True)

@@ -1,0 +1,172 @@
+"""Checkpoints: a run killed mid-curve continues from its last saved step.
+
+A campaign stores finished runs only, so a crash, a lost session or a cluster's time limit
+used to cost the whole of a run in progress, and the finest runs take hours. With a
+checkpoint file, the displacement-controlled protocol saves after a finished step, at
+most every ``every`` seconds, everything the next step reads: the contact state's arrays
+(contact set, F, u, the warm start's slopes; ``ContactState.carried``), the curve so far
+and its counters. A resumed run goes on from the next step and ends with the same curve,
+bit for bit, as a run that was never stopped (tests/test_checkpoint.py).
+
+A checkpoint serves only the run it was written for (the run id hashes every parameter)
+and the same engine (a hash of tfm's source files): other code could not promise the same
+bits, so the run then starts afresh, with a warning. Force control (its bisection keeps
+copies of states) and runs with field snapshots (a NetCDF stream) are not checkpointed.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+import time
+import warnings
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from .config import CHECKPOINT_EVERY
+
+FORMAT = 1
+
+_CODE_HASH = None
+
+
+def code_hash() -> str:
+    """sha256 of tfm's source files (names and contents): the engine that wrote a state."""
+    global _CODE_HASH
+    if _CODE_HASH is None:
+        root = Path(__file__).resolve().parent
+        h = hashlib.sha256()
+        for path in sorted(root.rglob("*.py")):
+            h.update(str(path.relative_to(root)).encode())
+            h.update(path.read_bytes())
+        _CODE_HASH = h.hexdigest()
+    return _CODE_HASH
+
+
+@dataclass
+class Resume:
+    """A saved run: the state to restore, the curve so far, where the protocol stood."""
+
+    carried: dict
+    out: object            # tfm.solver.CurveResult
+    phase: str             # "load" or "unload": the phase of the last finished step
+    j: int                 # that step's number within its phase (1-based)
+    elapsed: float         # the run's compute time so far (s)
+
+
+class Checkpoint:
+    """The checkpoint file of one run (``path``, an .npz), saved at most every ``every``
+    seconds; ``every = 0`` saves after every step (tests)."""
+
+    def __init__(self, path: str | os.PathLike, run_id: str, every: float = CHECKPOINT_EVERY):
+        if not every >= 0:
+            raise ValueError(f"checkpoint_every: must be >= 0 seconds, got {every!r}")
+        self.path = Path(path)
+        self.run_id = run_id
+        self.every = float(every)
+        self._last = time.monotonic()
+        self.resumed_at = None     # the step a loaded checkpoint continues from
+
+    # ---- reading -------------------------------------------------------------
+    def load(self) -> Resume | None:
+        """The saved run, or None (no file, another run or engine, unreadable: warned)."""
+        from .solver import CurveResult, StepRecord
+
+        if not self.path.exists():
+            return None
+        try:
+            with np.load(self.path, allow_pickle=False) as z:
+                arrays = {key: z[key] for key in z.files}
+            meta = json.loads(str(arrays.pop("meta")))
+        except (OSError, ValueError, KeyError) as exc:
+            return self._refuse(f"cannot be read ({exc})")
+        if meta.get("format") != FORMAT:
+            return self._refuse(f"has format {meta.get('format')!r}, this engine reads {FORMAT}")
+        if meta.get("run_id") != self.run_id:
+            return self._refuse(f"belongs to run {meta.get('run_id')!r}")
+        if meta.get("code") != code_hash():
+            return self._refuse("was written by another version of tfm's source, which cannot "
+                                "promise the same numbers")
+        out = CurveResult(**meta["counters"])
+        cols = {f.name: arrays.pop(f"curve.{f.name}") for f in fields(StepRecord)}
+        out.steps = [StepRecord(*(_plain(cols[f.name][i]) for f in fields(StepRecord)))
+                     for i in range(len(cols["step"]))]
+        carried = {name: _unflatten(name, value, arrays) for name, value in meta["carried"].items()}
+        self.resumed_at = len(out.steps)
+        return Resume(carried, out, meta["phase"], int(meta["j"]), float(meta["elapsed"]))
+
+    def _refuse(self, why: str) -> None:
+        from .simulate import RunWarning
+
+        warnings.warn(f"run {self.run_id}: checkpoint {self.path} {why}; the run starts afresh",
+                      RunWarning, stacklevel=3)
+        return None
+
+    # ---- writing -------------------------------------------------------------
+    def step_done(self, state, out, phase: str, j: int, elapsed: float) -> None:
+        """Called after every finished step; saves if ``every`` seconds have passed."""
+        if time.monotonic() - self._last >= self.every:
+            self.save(state, out, phase, j, elapsed)
+
+    def save(self, state, out, phase: str, j: int, elapsed: float) -> None:
+        """Write the state atomically: a temporary file in the same folder, then renamed."""
+        from .solver import StepRecord
+
+        arrays, carried = {}, {}
+        for name, value in state.carried().items():
+            carried[name] = _flatten(name, value, arrays)
+        for f in fields(StepRecord):
+            arrays[f"curve.{f.name}"] = np.array([getattr(s, f.name) for s in out.steps])
+        counters = {f.name: getattr(out, f.name) for f in fields(out) if f.name != "steps"}
+        meta = {"format": FORMAT, "run_id": self.run_id, "code": code_hash(), "phase": phase, "j": int(j),
+                "steps": len(out.steps), "elapsed": float(elapsed), "counters": counters, "carried": carried,
+                "written_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
+        arrays["meta"] = np.array(json.dumps(meta))
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+        os.replace(tmp, self.path)
+        self._last = time.monotonic()
+
+    def remove(self) -> None:
+        self.path.unlink(missing_ok=True)
+
+
+def read_meta(path: str | os.PathLike) -> dict | None:
+    """A checkpoint's metadata (run_id, steps done, phase, elapsed, written_at), or None
+    if it cannot be read."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+        meta.pop("carried", None)
+        return meta
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+# A carried value is None, a number, an array, or a tuple of numbers and arrays: numbers
+# go to the JSON metadata (repr round-trips a float64 exactly), arrays to the .npz.
+def _flatten(name, value, arrays):
+    if isinstance(value, tuple):
+        return {"tuple": [_flatten(f"{name}.{i}", v, arrays) for i, v in enumerate(value)]}
+    if isinstance(value, np.ndarray):
+        arrays[f"state.{name}"] = value
+        return {"array": f"state.{name}"}
+    return {"value": _plain(value)}
+
+
+def _unflatten(name, entry, arrays):
+    if "tuple" in entry:
+        return tuple(_unflatten(f"{name}.{i}", e, arrays) for i, e in enumerate(entry["tuple"]))
+    if "array" in entry:
+        return np.array(arrays[entry["array"]])          # a writable, contiguous copy
+    return entry["value"]
+
+
+def _plain(v):
+    """A numpy scalar as the Python number or string it holds."""
+    return v.item() if isinstance(v, np.generic) else v
