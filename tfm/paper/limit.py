@@ -72,8 +72,22 @@ def stored_points(geometry: str, spec, results_dir: Path) -> pd.DataFrame:
                      "spacing": p.spacing, "ratio": spec_ratio(p), "max_indent": p.delta_max,
                      "step": p.step, "F_max": s["pull_off_force"], "y": coefficient(p, s["pull_off_force"]),
                      "step_bound": analysis.step_sampling_bound(curve), "wall_time": s["wall_time"],
-                     "warnings": s.get("warnings", "")})
+                     "warnings": s.get("warnings", ""), "source": _run_file_source(meta)})
     return pd.DataFrame(rows)
+
+
+def _slowest(points: pd.DataFrame) -> str:
+    if not len(points):
+        return "none"
+    row = points.loc[points["wall_time"].astype(float).idxmax()]
+    return (f"{row['geometry']}, self term {row['self_term']:g}, a/Δ = {row['ratio']:.0f}, "
+            f"{float(row['wall_time']) / 60:.1f} min")
+
+
+def _run_file_source(meta: dict) -> str:
+    """Where a stored run's point comes from: its run file, and the day it was computed."""
+    started = str((meta.get("provenance") or {}).get("started_at") or "")[:10]
+    return f"run file of {started}, full precision" if started else "run file, full precision"
 
 
 # The points are kept with the report: every stored run's fit inputs, one row per run at
@@ -107,7 +121,8 @@ def kept_points(path: Path, specs: dict) -> pd.DataFrame:
 
 def merge_points(stored: pd.DataFrame, kept: pd.DataFrame) -> pd.DataFrame:
     """Stored runs first; a kept point only where its run is not stored here."""
-    stored = stored.assign(source="run file") if len(stored) else pd.DataFrame(columns=POINT_COLUMNS)
+    if not len(stored):
+        stored = pd.DataFrame(columns=POINT_COLUMNS)
     extra = kept[~kept["run_id"].isin(stored["run_id"])] if len(kept) else kept
     frames = [f for f in (stored, extra) if len(f)]
     return pd.concat(frames, ignore_index=True)[list(POINT_COLUMNS)] if frames else pd.DataFrame(columns=POINT_COLUMNS)
@@ -363,8 +378,10 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
         "",
         "## Run",
         "",
-        f"- this `make limit`: {wall / 60:.1f} min wall with `--jobs {jobs}`, {computed} runs computed now; "
-        f"the {len(points)} runs' own compute time adds up to {run_seconds / 60:.1f} min.",
+        (f"- this `make limit`: {wall / 60:.1f} min wall with `--jobs {jobs}`, {computed} runs computed now; "
+         if computed else "- this `tfm limit`: a refit of the points at hand, 0 runs computed now; ") +
+        f"the {len(points)} runs' own compute time adds up to {run_seconds / 60:.1f} min "
+        f"(the slowest: {_slowest(points)}).",
         "- points: " + ", ".join(f"{n} from {src}" for src, n in
                                  (points["source"].value_counts().items() if len(points) else [])) +
         f" (one row per run, with its source: [{POINTS_FILE}]({POINTS_FILE}); `make limit` computes only the "
