@@ -3,6 +3,7 @@ the curve of a run that was never stopped, bit for bit; a checkpoint that cannot
 refused before any computation, or set aside with a warning."""
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +32,25 @@ def stop_after(steps: int):
         if rec.step + 1 == steps:
             raise Stop
     return progress
+
+
+@contextlib.contextmanager
+def crash_after(steps: int):
+    """A crash (RuntimeError) once ``steps`` steps have been recorded, in any run of this
+    process: raised after the step is recorded and before its checkpoint is saved."""
+    record, count = tfm.protocol._record, [0]
+
+    def crashing(out, state, rec, observe):
+        record(out, state, rec, observe)
+        count[0] += 1
+        if count[0] == steps:
+            raise RuntimeError("simulated crash")
+
+    tfm.protocol._record = crashing
+    try:
+        yield
+    finally:
+        tfm.protocol._record = record
 
 
 def assert_same_run(a, b) -> None:
@@ -113,24 +133,15 @@ def test_a_checkpoint_that_cannot_serve_is_refused_before_any_computation(tmp_pa
         run_campaign(load_spec(SMOKE), results_dir=tmp_path, checkpoint_every=-1)
 
 
-def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, monkeypatch, capsys):
+def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, capsys):
     """The first run of the smoke campaign crashes after 10 steps (a failure is recorded,
     its checkpoint stays); the next `campaign run` continues it from step 9 and the tables
     equal those of an uninterrupted campaign."""
     spec = load_spec(SMOKE)
     clean = run_campaign(spec, quiet=True, results_dir=tmp_path / "clean")
 
-    record, calls = tfm.protocol._record, []
-
-    def crash_once(out, state, rec, observe):
-        record(out, state, rec, observe)
-        calls.append(rec.step)
-        if len(calls) == 10:
-            raise RuntimeError("simulated crash")
-
-    monkeypatch.setattr(tfm.protocol, "_record", crash_once)
-    root = run_campaign(spec, quiet=True, results_dir=tmp_path / "crashed", checkpoint_every=0)
-    monkeypatch.setattr(tfm.protocol, "_record", record)
+    with crash_after(10):
+        root = run_campaign(spec, quiet=True, results_dir=tmp_path / "crashed", checkpoint_every=0)
     store = CampaignStore(root)
     first = spec.runs[0].run_id
     assert store.status(spec).failed == [first]
@@ -146,3 +157,37 @@ def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, mon
     keep = [c for c in summary.columns if not c.startswith("prov_") and c != "r_wall_time"]
     pd.testing.assert_frame_equal(summary[keep], ref_summary[keep], check_exact=True)
     pd.testing.assert_frame_equal(curves, ref_curves, check_exact=True)
+
+
+CLI_RUN = ["run", "--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.02",
+           "--step", "1e-3", "--no-plot"]
+
+
+def test_tfm_run_continues_a_killed_run_from_its_checkpoint(reference, tmp_path, capsys):
+    """The same `tfm run` command twice: the first is killed after 8 steps (its checkpoint,
+    saved after every step, stays beside the table), the second continues at step 7 and
+    writes the uninterrupted curve."""
+    import pyarrow.parquet as pq
+
+    out = tmp_path / "curve.parquet"
+    args = [*CLI_RUN, "-o", str(out), "--checkpoint-every", "0"]
+    with crash_after(8), pytest.raises(RuntimeError, match="simulated crash"):
+        tfm_main(args)
+    saved = tmp_path / "curve.checkpoint.npz"
+    assert not out.exists() and tfm.checkpoint.read_meta(saved)["steps"] == 7
+    capsys.readouterr()
+    assert tfm_main(args) == 0
+    assert "continued from the checkpoint" in capsys.readouterr().err and not saved.exists()
+    curve = pq.read_table(out).to_pandas()
+    pd.testing.assert_frame_equal(curve, reference.curve, check_exact=True)
+
+
+@pytest.mark.parametrize("extra, expected", [
+    (["--checkpoint-every", "-5"], "checkpoint-every: must be >= 0"),
+    (["--checkpoint-every", "60", "--snapshots", "5"], "only displacement-controlled runs without field"),
+    (["--checkpoint-every", "60", "--no-checkpoints"], "not both"),
+])
+def test_tfm_run_refuses_a_checkpoint_that_cannot_serve(tmp_path, capsys, extra, expected):
+    assert tfm_main([*CLI_RUN, "-o", str(tmp_path / "c.parquet"), *extra]) == 2
+    assert expected in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())

@@ -147,6 +147,32 @@ def _plan_outputs(args, p: Params) -> tuple[Path, Path | None]:
     return out, plot
 
 
+def _checkpoint_options(args, p: Params, out: Path) -> dict:
+    """simulate()'s checkpoint arguments: by default a displacement-controlled run without
+    snapshots saves its state beside the table every CHECKPOINT_EVERY seconds, and the same
+    command continues a killed run. Asking for checkpoints where they cannot serve is refused."""
+    if args.no_checkpoints:
+        if args.checkpoint_every is not None:
+            raise ParameterError("checkpoint-every: give it or --no-checkpoints, not both")
+        return {}
+    from .config import CHECKPOINT_EVERY
+
+    serves = p.control == "displacement" and p.snapshots == "none"
+    if args.checkpoint_every is None:
+        return {"checkpoint": checkpoint_path_for(out), "checkpoint_every": CHECKPOINT_EVERY} if serves else {}
+    if not args.checkpoint_every >= 0:
+        raise ParameterError(f"checkpoint-every: must be >= 0 seconds, got {args.checkpoint_every!r}")
+    if not serves:
+        raise ParameterError("checkpoint-every: only displacement-controlled runs without field snapshots "
+                             f"are checkpointed (this one: control={p.control!r}, snapshots={p.snapshots!r})")
+    return {"checkpoint": checkpoint_path_for(out), "checkpoint_every": args.checkpoint_every}
+
+
+def checkpoint_path_for(curve_path: Path) -> Path:
+    """Where a `tfm run`'s checkpoint lives: beside its table, ``<stem>.checkpoint.npz``."""
+    return curve_path.with_name(curve_path.stem + ".checkpoint.npz")
+
+
 def cmd_run(args) -> int:
     import warnings
 
@@ -156,6 +182,7 @@ def cmd_run(args) -> int:
     p = _params_from_args(args)
     notes = check(p)                      # refuses meaningless or oversized runs (exit 2)
     out, plot_path = _plan_outputs(args, p)
+    ckpt = _checkpoint_options(args, p, out)
     if not args.quiet:
         print(f"tfm run {p.run_id}: spacing={p.spacing:.6g} F_th={p.threshold_force:.4g} "
               f"R={p.radius:g} shape={p.shape} kernel={p.kernel} operator={p.operator} "
@@ -170,7 +197,11 @@ def cmd_run(args) -> int:
     with warnings.catch_warnings(), run_progress(p, quiet=args.quiet) as progress:
         warnings.simplefilter("ignore", RunWarning)
         from .results import fields_path_for
-        res = simulate(p, progress=progress, fields_path=fields_path_for(out) if p.snapshots != "none" else None)
+        res = simulate(p, progress=progress, fields_path=fields_path_for(out) if p.snapshots != "none" else None,
+                       **ckpt)
+    if res.provenance.get("resumed_at_step") and not args.quiet:
+        print(f"continued from the checkpoint {ckpt['checkpoint']} at step {res.provenance['resumed_at_step']} "
+              "(the steps before were computed by the run that was stopped)", file=sys.stderr)
     res.write_curve(out)
     if plot_path is not None:
         from .plots import plot_curve
@@ -213,6 +244,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the plot (.png, .pdf, .svg; default: beside the table, as .png)")
     run.add_argument("--overwrite", action="store_true", help="replace existing output files")
     run.add_argument("--no-plot", action="store_true")
+    run.add_argument("--checkpoint-every", type=float, default=None, metavar="SECONDS",
+                     help="save the running curve's state this often beside the table "
+                          "(<stem>.checkpoint.npz), so that the same command continues a killed run "
+                          "(default 600 for displacement control without snapshots)")
+    run.add_argument("--no-checkpoints", action="store_true", help="save no checkpoint")
     run.add_argument("-q", "--quiet", action="store_true")
     run.set_defaults(func=cmd_run)
     from .campaign.cli import register
