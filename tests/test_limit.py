@@ -265,3 +265,26 @@ def test_kept_limit_fits_are_stable_without_any_one_point(self_term):
         part = fit_limit(x[keep], y[keep])
         assert part.y_inf_low <= full.y_inf <= part.y_inf_high, (x[i], full.text(), part.text())
         assert part.p > 0
+
+
+def test_the_report_stability_table_is_the_leave_one_out_refit():
+    """The report's stability verdict (LimitResult.stability) against the explicit loop
+    of the test above, on the kept points: same verdict, same range of y_inf."""
+    from tfm.paper.limit import LIMIT_CAMPAIGNS, POINTS_FILE, fit_all, kept_points
+    from tfm.paper.run import load_spec_for
+
+    specs = {g: load_spec_for(stem) for g, stem in LIMIT_CAMPAIGNS}
+    points = kept_points(Path(__file__).parents[1] / "results" / "limit" / POINTS_FILE, specs)
+    checked = []
+    for res in fit_all(points):
+        if res.geometry != "paraboloid":
+            continue
+        st = res.stability()
+        pts = res.points.sort_values("ratio")
+        x, y = pts["ratio"].to_numpy(), pts["y"].to_numpy()
+        parts = [fit_limit(np.delete(x, i), np.delete(y, i)) for i in range(x.size)]
+        holds = [f.y_inf_low <= res.fit.y_inf <= f.y_inf_high and f.p > 0 for f in parts]
+        assert st["stable"] == all(holds)
+        assert st["y_inf_min"] == min(f.y_inf for f in parts) and st["y_inf_max"] == max(f.y_inf for f in parts)
+        checked.append(res.self_term)
+    assert len(checked) == 3          # every self term of the campaign has a fit to check

@@ -185,6 +185,22 @@ class LimitResult:
         ref = theory.JKR_COEFFICIENT
         return tuple(math.sqrt(v / ref) if v > 0 else math.nan for v in vals)
 
+    def leave_one_out(self) -> list[tuple[float, analysis.LimitFit]]:
+        """The fit without each point in turn: (the a/Δ left out, its fit)."""
+        x, y = self.points["ratio"].to_numpy(), self.points["y"].to_numpy()
+        return [(float(x[i]), analysis.fit_limit(np.delete(x, i), np.delete(y, i))) for i in range(x.size)]
+
+    def stability(self) -> dict:
+        """Whether the limit survives leaving out any one point: every such fit keeps the
+        full fit's y_inf inside its 95 % interval, with p > 0 (issue 12's check)."""
+        loo = self.leave_one_out()
+        full = self.fit.y_inf
+        misses = [(x, f) for x, f in loo if not (f.y_inf_low <= full <= f.y_inf_high and f.p > 0)]
+        worst_x, worst = max(loo, key=lambda xf: abs(xf[1].y_inf - full))
+        return {"stable": not misses, "y_inf_min": min(f.y_inf for _, f in loo),
+                "y_inf_max": max(f.y_inf for _, f in loo), "p_min": min(f.p for _, f in loo),
+                "p_max": max(f.p for _, f in loo), "misses": misses, "worst": (worst_x, worst)}
+
     @property
     def largest_ratio(self) -> float:
         return float(self.points["ratio"].max()) if len(self.points) else math.nan
@@ -351,6 +367,36 @@ def same_constant(results: list[LimitResult]) -> list[str]:
     return out
 
 
+def stability_section(results: list[LimitResult]) -> list[str]:
+    """Leave-one-out refits of every paraboloid fit that pins p: a table and a verdict."""
+    rows, notes = [], []
+    for r in results:
+        if r.geometry != "paraboloid" or not r.trend_found:
+            continue
+        st = r.stability()
+        wx, wf = st["worst"]
+        rows.append({"self term": f"{r.self_term:g}", "full fit y∞": f"{r.fit.y_inf:.3f}",
+                     "y∞ without one point": f"{st['y_inf_min']:.3f}–{st['y_inf_max']:.3f}",
+                     "p without one point": f"{st['p_min']:.2f}–{st['p_max']:.2f}",
+                     "largest move": f"without a/Δ = {wx:.0f}: {wf.y_inf:.3f} [{wf.y_inf_low:.3f}, {wf.y_inf_high:.3f}], "
+                                     f"p = {wf.p:.2f}",
+                     "stable": "yes" if st["stable"] else "no"})
+        if not st["stable"]:
+            left = ", ".join(f"{x:.0f}" for x, _ in st["misses"])
+            notes.append(f"- self term {r.self_term:g}: without the point(s) at a/Δ = {left} the interval "
+                         f"excludes the full fit's {r.fit.y_inf:.3f}. The limit then depends on whether those "
+                         f"points belong to the asymptotic range: read it as {st['y_inf_min']:.2f}–"
+                         f"{max(st['y_inf_max'], r.fit.y_inf):.2f}, not as the interval above.")
+    if not rows:
+        return []
+    from .report import md_table
+
+    return (["## Stability: the fit without any one point", "",
+             "Each paraboloid fit that pins p, refitted once without each of its points. “Stable” means that "
+             "every such fit keeps the full fit's y∞ inside its own 95 % interval, with p > 0.", "",
+             md_table(pd.DataFrame(rows)), ""] + notes + ([""] if notes else []))
+
+
 def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitResult], specs: dict,
                        wall: float, computed: int, jobs: int, start_load: float) -> dict:
     from .report import machine, md_table
@@ -402,6 +448,7 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
               "compares F_max at "
               "a deeper preload with the main one at the same spacing. A p interval marked ≤ or ≥ reaches the "
               f"search range {analysis.LIMIT_P_BOUNDS} and is open there.", ""]
+    lines += stability_section(results)
     lines += ["## What it means", ""]
     para = [r for r in results if r.geometry == "paraboloid" and r.fit is not None]
     summary = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "fits": []}
@@ -414,6 +461,10 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
                                     "p_low": r.fit.p_low, "p_high": r.fit.p_high, "points": len(r.points),
                                     "largest_ratio": r.largest_ratio, "k_ratio": list(r.k_ratio),
                                     "preload_change": r.preload_change})
+            if r.geometry == "paraboloid" and r.trend_found:
+                st = r.stability()
+                summary["fits"][-1].update(stable_without_any_one_point=st["stable"],
+                                           y_inf_without_one_point=[st["y_inf_min"], st["y_inf_max"]])
     for r in para:
         best, low, high, source = r.estimate
         if not math.isfinite(best):
