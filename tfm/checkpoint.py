@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import CHECKPOINT_EVERY
+from .params import ParameterError
 
 FORMAT = 1
 
@@ -46,6 +47,21 @@ def code_hash() -> str:
     return _CODE_HASH
 
 
+def why_not(p) -> str | None:
+    """Why the run ``p`` cannot have a checkpoint, or None if it can."""
+    if p.control == "displacement" and p.snapshots == "none":
+        return None
+    return (f"only displacement-controlled runs without field snapshots are checkpointed (this one: "
+            f"control={p.control!r}, snapshots={p.snapshots!r})")
+
+
+def check_every(every, name: str = "checkpoint_every") -> float:
+    """The interval between saves in seconds; anything but a number >= 0 is refused."""
+    if isinstance(every, bool) or not isinstance(every, (int, float)) or not every >= 0:
+        raise ParameterError(f"{name}: must be >= 0 seconds, got {every!r}")
+    return float(every)
+
+
 @dataclass
 class Resume:
     """A saved run: the state to restore, the curve so far, where the protocol stood."""
@@ -62,11 +78,9 @@ class Checkpoint:
     seconds; ``every = 0`` saves after every step (tests)."""
 
     def __init__(self, path: str | os.PathLike, run_id: str, every: float = CHECKPOINT_EVERY):
-        if not every >= 0:
-            raise ValueError(f"checkpoint_every: must be >= 0 seconds, got {every!r}")
         self.path = Path(path)
         self.run_id = run_id
-        self.every = float(every)
+        self.every = check_every(every)
         self._last = time.monotonic()
         self.resumed_at = None     # the step a loaded checkpoint continues from
 

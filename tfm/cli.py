@@ -155,17 +155,16 @@ def _checkpoint_options(args, p: Params, out: Path) -> dict:
         if args.checkpoint_every is not None:
             raise ParameterError("checkpoint-every: give it or --no-checkpoints, not both")
         return {}
+    from .checkpoint import check_every, why_not
     from .config import CHECKPOINT_EVERY
 
-    serves = p.control == "displacement" and p.snapshots == "none"
+    reason = why_not(p)
     if args.checkpoint_every is None:
-        return {"checkpoint": checkpoint_path_for(out), "checkpoint_every": CHECKPOINT_EVERY} if serves else {}
-    if not args.checkpoint_every >= 0:
-        raise ParameterError(f"checkpoint-every: must be >= 0 seconds, got {args.checkpoint_every!r}")
-    if not serves:
-        raise ParameterError("checkpoint-every: only displacement-controlled runs without field snapshots "
-                             f"are checkpointed (this one: control={p.control!r}, snapshots={p.snapshots!r})")
-    return {"checkpoint": checkpoint_path_for(out), "checkpoint_every": args.checkpoint_every}
+        return {} if reason else {"checkpoint": checkpoint_path_for(out), "checkpoint_every": CHECKPOINT_EVERY}
+    every = check_every(args.checkpoint_every, "checkpoint-every")
+    if reason:
+        raise ParameterError(f"checkpoint-every: {reason}")
+    return {"checkpoint": checkpoint_path_for(out), "checkpoint_every": every}
 
 
 def checkpoint_path_for(curve_path: Path) -> Path:

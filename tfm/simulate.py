@@ -5,11 +5,11 @@ import warnings
 
 import numpy as np
 
-from .checkpoint import CHECKPOINT_EVERY, Checkpoint
+from .checkpoint import CHECKPOINT_EVERY, Checkpoint, why_not
 from .geometry import heights, make_layout
 from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
-from .params import Params
+from .params import ParameterError, Params
 from .results import RunResult, curve_frame, provenance, summarize
 from .solver import Problem
 from .threshold import threshold_forces
@@ -104,16 +104,13 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
 
 def _checkpoint(p: Params, path, every: float) -> Checkpoint:
     """The run's checkpoint, refused before any computation where it cannot serve."""
-    if p.control != "displacement":
-        raise ValueError(f"checkpoint: only displacement-controlled runs are checkpointed, this one "
-                         f"has control = {p.control!r}")
-    if p.snapshots != "none":
-        raise ValueError(f"checkpoint: runs with field snapshots (snapshots = {p.snapshots!r}) are "
-                         "not checkpointed: the snapshot stream cannot be resumed")
+    reason = why_not(p)
+    if reason:
+        raise ParameterError(f"checkpoint: {reason}")
     ckpt = Checkpoint(path, p.run_id, every)
     try:
         ckpt.path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ValueError(f"checkpoint: cannot write the folder {ckpt.path.parent}: "
+        raise ParameterError(f"checkpoint: cannot write the folder {ckpt.path.parent}: "
                          f"{exc.strerror or exc}") from None
     return ckpt

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from ..config import CHECKPOINT_EVERY
+from ..params import ParameterError
 from .spec import CampaignError, CampaignSpec, Run, load_spec
 from .store import CampaignStore
 
@@ -67,10 +68,13 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
     spec = spec_or_path if isinstance(spec_or_path, CampaignSpec) else load_spec(spec_or_path)
     if not isinstance(jobs, int) or jobs < 1:
         raise CampaignError(f"jobs: must be a whole number >= 1, got {jobs!r}")
-    if checkpoint_every is not None and not (isinstance(checkpoint_every, (int, float))
-                                             and not isinstance(checkpoint_every, bool) and checkpoint_every >= 0):
-        raise CampaignError(f"checkpoint-every: must be a number of seconds >= 0 (or None: no "
-                            f"checkpoints), got {checkpoint_every!r}")
+    if checkpoint_every is not None:
+        from ..checkpoint import check_every
+
+        try:
+            checkpoint_every = check_every(checkpoint_every, "checkpoint-every")
+        except ParameterError as exc:
+            raise CampaignError(f"{exc} (or None: no checkpoints)") from None
     store = CampaignStore.for_spec(spec, results_dir)
     with store.lock():
         store.claim(spec)
@@ -97,7 +101,7 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
                 print(f"warning: campaign {spec.name}: {len(noted) - 3} more runs with such notes "
                       "(they are flagged in the summary)", file=sys.stderr)
         if todo:
-            ckpt = None if checkpoint_every is None else (store.checkpoints_dir, float(checkpoint_every))
+            ckpt = None if checkpoint_every is None else (store, checkpoint_every)
             if scheduler is not None:
                 outcomes = _run_dask(todo, scheduler)
             elif jobs > 1 and len(todo) > 1:
@@ -160,7 +164,7 @@ def _progress(name: str, total: int, quiet: bool):
 # ---- the work of one run (runs in a worker) ----------------------------------
 def execute(params, executor: str = "serial", ckpt=None) -> Outcome:
     """Simulate one run; never raises, so one bad run cannot stop the campaign. ``ckpt``:
-    (folder, seconds) of the run's checkpoint, for the runs that can have one."""
+    (the CampaignStore, seconds) of the run's checkpoint, for the runs that can have one."""
     try:
         import numba
 
@@ -178,10 +182,12 @@ def execute(params, executor: str = "serial", ckpt=None) -> Outcome:
 
 
 def _checkpoint_args(params, ckpt) -> dict:
-    if ckpt is None or params.control != "displacement" or params.snapshots != "none":
+    from ..checkpoint import why_not
+
+    if ckpt is None or why_not(params):
         return {}
-    folder, every = ckpt
-    return {"checkpoint": Path(folder) / f"{params.run_id}.npz", "checkpoint_every": every}
+    store, every = ckpt
+    return {"checkpoint": store.checkpoint_path(params.run_id), "checkpoint_every": every}
 
 
 def _set_threads(threads: int, set_env: bool = True) -> None:

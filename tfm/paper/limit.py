@@ -156,6 +156,7 @@ class LimitResult:
     fit: analysis.LimitFit | None
     pairs: pd.DataFrame
     level: analysis.Plateau | None = None
+    _stability: dict | None = dataclasses.field(default=None, repr=False, compare=False)
 
     @property
     def trend_found(self) -> bool:
@@ -192,14 +193,18 @@ class LimitResult:
 
     def stability(self) -> dict:
         """Whether the limit survives leaving out any one point: every such fit keeps the
-        full fit's y_inf inside its 95 % interval, with p > 0 (issue 12's check)."""
+        full fit's y_inf inside its 95 % interval, with p > 0 (issue 12's check). Computed
+        once: the report's table and summary.json both read it."""
+        if self._stability is not None:
+            return self._stability
         loo = self.leave_one_out()
         full = self.fit.y_inf
         misses = [(x, f) for x, f in loo if not (f.y_inf_low <= full <= f.y_inf_high and f.p > 0)]
         worst_x, worst = max(loo, key=lambda xf: abs(xf[1].y_inf - full))
-        return {"stable": not misses, "y_inf_min": min(f.y_inf for _, f in loo),
-                "y_inf_max": max(f.y_inf for _, f in loo), "p_min": min(f.p for _, f in loo),
-                "p_max": max(f.p for _, f in loo), "misses": misses, "worst": (worst_x, worst)}
+        self._stability = {"stable": not misses, "y_inf_min": min(f.y_inf for _, f in loo),
+                           "y_inf_max": max(f.y_inf for _, f in loo), "p_min": min(f.p for _, f in loo),
+                           "p_max": max(f.p for _, f in loo), "misses": misses, "worst": (worst_x, worst)}
+        return self._stability
 
     @property
     def largest_ratio(self) -> float:
