@@ -62,49 +62,50 @@ def symbol(cut2, spacing, diag0, P):
 
 
 @njit(**NUMBA_OPTS)
-def _rows_forward(src, r0, r1, spec, P, c):
-    lo = r0 + c * CHUNK
-    hi = min(r1, lo + CHUNK)
+def _rows_forward(src, r0, r1, spec, P, c, chunk):
+    lo = r0 + c * chunk
+    hi = min(r1, lo + chunk)
     spec[lo:hi] = sfft.rfft(src[lo:hi], n=P, axis=1)
 
 
 @njit(**NUMBA_OPTS)
-def _columns(spec, W, sym, c):
-    lo = c * CHUNK
-    hi = min(spec.shape[1], lo + CHUNK)
+def _columns(spec, W, sym, c, chunk):
+    lo = c * chunk
+    hi = min(spec.shape[1], lo + chunk)
     col = sfft.fft(spec[:W, lo:hi], n=sym.shape[0], axis=0)
     col *= sym[:, lo:hi]
     spec[:W, lo:hi] = sfft.ifft(col, axis=0)[:W]
 
 
 @njit(**NUMBA_OPTS)
-def _rows_inverse(spec, out, P, c):
-    lo = c * CHUNK
-    hi = min(out.shape[0], lo + CHUNK)
+def _rows_inverse(spec, out, P, c, chunk):
+    lo = c * chunk
+    hi = min(out.shape[0], lo + chunk)
     out[lo:hi] = sfft.irfft(spec[lo:hi], n=P, axis=1)
 
 
 # The same three stages twice: serial (no thread start-up for small boxes) and parallel.
+# ``chunk`` is CHUNK in the engine (an argument so that the bench can compare lengths).
 @njit(**NUMBA_OPTS)
-def _stages_serial(src, r0, r1, spec, out, P, sym):
+def _stages_serial(src, r0, r1, spec, out, P, sym, chunk):
     W = out.shape[0]
-    for c in range((r1 - r0 + CHUNK - 1) // CHUNK):
-        _rows_forward(src, r0, r1, spec, P, c)
-    for c in range((spec.shape[1] + CHUNK - 1) // CHUNK):
-        _columns(spec, W, sym, c)
-    for c in range((W + CHUNK - 1) // CHUNK):
-        _rows_inverse(spec, out, P, c)
+    for c in range((r1 - r0 + chunk - 1) // chunk):
+        _rows_forward(src, r0, r1, spec, P, c, chunk)
+    for c in range((spec.shape[1] + chunk - 1) // chunk):
+        _columns(spec, W, sym, c, chunk)
+    for c in range((W + chunk - 1) // chunk):
+        _rows_inverse(spec, out, P, c, chunk)
 
 
 @njit(**PARALLEL_OPTS)
-def _stages_parallel(src, r0, r1, spec, out, P, sym):
+def _stages_parallel(src, r0, r1, spec, out, P, sym, chunk):
     W = out.shape[0]
-    for c in prange((r1 - r0 + CHUNK - 1) // CHUNK):
-        _rows_forward(src, r0, r1, spec, P, c)
-    for c in prange((spec.shape[1] + CHUNK - 1) // CHUNK):
-        _columns(spec, W, sym, c)
-    for c in prange((W + CHUNK - 1) // CHUNK):
-        _rows_inverse(spec, out, P, c)
+    for c in prange((r1 - r0 + chunk - 1) // chunk):
+        _rows_forward(src, r0, r1, spec, P, c, chunk)
+    for c in prange((spec.shape[1] + chunk - 1) // chunk):
+        _columns(spec, W, sym, c, chunk)
+    for c in prange((W + chunk - 1) // chunk):
+        _rows_inverse(spec, out, P, c, chunk)
 
 
 def threads_pay(w, sym, threads, repeats=5):
@@ -123,7 +124,7 @@ def threads_pay(w, sym, threads, repeats=5):
     for k in range(repeats + 1):          # round 0 warms up the thread pool
         for stages, kept in times.items():
             t = time.perf_counter()
-            stages(src, 0, w, spec, out, P, sym)
+            stages(src, 0, w, spec, out, P, sym, CHUNK)
             if k:
                 kept.append(time.perf_counter() - t)
     # medians: a lucky threaded call must not hide the barriers' waits under load
@@ -145,9 +146,9 @@ def convolve(src, r0, r1, spec, out, sym, threaded):
         spec[:r0] = 0.0
         spec[r1:] = 0.0
         if threaded and P >= THREADED_SIZE:
-            _stages_parallel(src, r0, r1, spec, out, P, sym)
+            _stages_parallel(src, r0, r1, spec, out, P, sym, CHUNK)
         else:
-            _stages_serial(src, r0, r1, spec, out, P, sym)
+            _stages_serial(src, r0, r1, spec, out, P, sym, CHUNK)
         return
     W = out.shape[0]
     a = sfft.rfft(src[r0:r1], n=P, axis=1)
