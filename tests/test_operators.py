@@ -110,3 +110,35 @@ def test_neighbors_foundation_compliance_matches_the_operator(rings):
     centre = layout.n // 2
     expected = theory.neighbors_foundation_compliance(rings, p.self_term, p.spacing) * sigma
     assert u[centre] == pytest.approx(expected, rel=1e-12)   # same finite sum: round-off
+
+
+def test_whole_grid_field_uses_the_smallest_image_free_box():
+    """The compiled field u = C F on every spring (tfm.kernels.ops.field_on_grid) sizes its
+    periodic box by the sources' reach, not by the grid: against the double loop for
+    sources in a corner (the whole grid's box), in the middle and off the middle (smaller
+    boxes), one after the other in the same buffers."""
+    from tfm.kernels.grid import grid_reach
+    from tfm.kernels.ops import field_box, field_on_grid
+    p = tiny(extent=15 / 8)                      # 31 x 31 springs
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    C = compliance_double_loop(layout.x, layout.y, spec.diag, p.kernel, spec.cutoff)
+    data = FFTOperator(spec, layout).compiled()
+    n = data.n
+    rng = np.random.default_rng(3)
+
+    def block(i0, j0, w):
+        return np.array([i * n + j for i in range(i0, i0 + w) for j in range(j0, j0 + w)])
+
+    cases = {"corner": block(0, 0, 5), "middle": block(12, 12, 7), "off-middle": block(5, 18, 5)}
+    full = data.sym_full.shape[0]
+    sizes = {k: field_box(n, 2 * grid_reach(n, idx) + 1) for k, idx in cases.items()}
+    assert sizes["corner"] == full and sizes["middle"] < full and sizes["off-middle"] < full
+    for name in ("corner", "middle", "off-middle", "corner"):
+        idx = cases[name]
+        f = rng.normal(size=idx.size)
+        u = np.full(n * n, np.nan)
+        field_on_grid(idx, f, n, data.syms, data.isyms, data.cut2, data.spacing, data.diag[0],
+                      data.src, data.spec, data.out, u, False)
+        ref = C[:, idx] @ f
+        assert np.allclose(u, ref, rtol=0, atol=RTOL * np.abs(ref).max()), name

@@ -41,6 +41,14 @@ ROUND_TOLS = (1e-7,)
 FFT_THREADED_SIZE = 192
 
 
+# Box sizes of the whole-grid field u = C F, as fractions of the whole grid's box
+# (P = fast_len(2 n - 1)): the field of a contact takes the smallest rung with no images
+# (tfm.kernels.ops.field_on_grid). A ladder, not the exact size, so that a run caches at
+# most these symbols (memory: tfm.guards.estimate_memory); a contact in the middle of the
+# grid needs about (n + w) / (2 n) of the whole box, so the field costs ~ 1/4 to 1.
+FIELD_BOX_FRACTIONS = (0.55, 0.625, 0.7, 0.775, 0.85, 0.925, 1.0)
+
+
 def fft_workers() -> int:
     """Threads for scipy.fft; follows NUMBA_NUM_THREADS so campaign workers share cores."""
     value = os.environ.get("NUMBA_NUM_THREADS") or os.environ.get("OMP_NUM_THREADS")

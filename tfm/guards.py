@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 
+from .config import FIELD_BOX_FRACTIONS
 from .params import ParameterError
 
 MIN_SPRINGS_ACROSS_RADIUS = 2.0
@@ -95,6 +96,9 @@ def _next_fast_len(n: int) -> int:
 # at 2049^2 (docs/physics.md, section 8)
 BYTES_PER_SPRING = {"fft": 200.0, "direct": 200.0, "tree": 240.0}
 BYTES_PER_FFT_CELL = 16.0
+# the whole-grid field's smaller boxes (config.FIELD_BOX_FRACTIONS): one real symbol each,
+# P x (P/2 + 1) doubles, 4 bytes a cell
+BYTES_PER_FIELD_CELL = 4.0
 BASELINE_BYTES = 450e6     # measured 238 to 420 MiB after imports (and compilation)
 
 
@@ -104,7 +108,8 @@ def estimate_memory(p) -> float:
     O(N) arrays per spring (positions, areas, heights, thresholds, forces, masks, the
     solver's work vectors; the tree's keys and nodes), plus for the FFT operator the
     full-grid symbol on the padded P x P box (P = fast size >= 2n - 1: the kernel, its
-    real transform and the inverse symbol), plus the Python/NumPy/SciPy/Numba runtime.
+    real transform and the inverse symbol) and the symbols of the field's smaller boxes,
+    plus the Python/NumPy/SciPy/Numba runtime.
     """
     n = n_springs(p)
     total = BASELINE_BYTES + BYTES_PER_SPRING[p.operator] * n
@@ -112,6 +117,8 @@ def estimate_memory(p) -> float:
         side = int(round(math.sqrt(n)))
         P = _next_fast_len(2 * side - 1)
         total += BYTES_PER_FFT_CELL * P * P
+        rungs = {_next_fast_len(math.ceil(f * P)) for f in FIELD_BOX_FRACTIONS}
+        total += BYTES_PER_FIELD_CELL * sum(Q * Q for Q in rungs if Q < P)
     return total
 
 

@@ -64,3 +64,15 @@ def index_box(n, idx):
         j0 = min(j0, j)
         j1 = max(j1, j)
     return i0, j0, max(i1 - i0, j1 - j0) + 1, i1 - i0 + 1
+
+
+@njit(**NUMBA_OPTS)
+def grid_reach(n, idx):
+    """The largest offset, along either axis, from a spring of idx to any point of the
+    n x n grid: the farthest grid edge from idx's bounding box."""
+    i0, j0, w, h = index_box(n, idx)
+    i1 = i0 + h - 1
+    j1 = j0
+    for k in range(idx.size):
+        j1 = max(j1, idx[k] % n)
+    return max(max(i1, n - 1 - i0), max(j1, n - 1 - j0))

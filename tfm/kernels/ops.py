@@ -25,10 +25,10 @@ from numba import njit, types
 from numba.extending import overload
 from numba.typed import Dict
 
-from ..config import NUMBA_OPTS
+from ..config import FIELD_BOX_FRACTIONS, NUMBA_OPTS
 from .direct import _pair_sums
 from .fft import convolve, fast_len, symbol
-from .grid import index_box, stencil_apply
+from .grid import grid_reach, index_box, stencil_apply
 from .tree import (MORTON_BITS, build_nodes, csr_apply, evaluate, node_boxes, node_geometry,
                    node_moments, subset_order)
 
@@ -50,8 +50,8 @@ class FFTData(NamedTuple):
     diag: np.ndarray        # C_ii per spring
     syms: object            # typed dict P -> symbol (shared with the operator)
     isyms: object           # typed dict P -> inverse symbol
-    sym_full: np.ndarray    # symbol of the whole grid's box (the field u = C F)
-    src: np.ndarray         # work buffers of the whole-grid field
+    sym_full: np.ndarray    # symbol of the whole grid's box, P = fast_len(2 n - 1)
+    src: np.ndarray         # work buffers of the whole-grid field (sized for that P)
     spec: np.ndarray
     out: np.ndarray
     threaded: bool          # spread large transforms over the Numba threads
@@ -139,32 +139,43 @@ def new_symbol_cache(P, sym):
 def box_symbols(syms, isyms, P, cut2, spacing, diag0):
     """The symbol and its inverse for box size P, cached in the typed dicts."""
     if P not in syms:
-        s = symbol(cut2, spacing, diag0, P)
-        syms[P] = s
-        isyms[P] = (1.0 / s).astype(PRECOND_DTYPE)
+        syms[P] = symbol(cut2, spacing, diag0, P)
+    if P not in isyms:
+        isyms[P] = (1.0 / syms[P]).astype(PRECOND_DTYPE)
     return syms[P], isyms[P]
 
 
 @njit(**NUMBA_OPTS)
-def box_apply_set(sym, idx, vals, n, i0, j0, h, box, spec, out, res, threaded):
-    """res = K vals on the springs idx of the box at (i0, j0), K given by its symbol."""
-    box[:h] = 0.0
-    for k in range(idx.size):
-        f = idx[k]
-        box[f // n - i0, f % n - j0] = vals[k]
+def box_apply_set(sym, at_box, at_out, vals, h, box, spec, out, res, threaded):
+    """res = K vals for springs at the flat positions at_box of the w x w box (the first h
+    rows hold them) and at_out of the w x P transform output, K given by its symbol. Only
+    these positions of ``box`` are ever written in a solve, so the rest stays zero."""
+    flat = box.reshape(-1)
+    for k in range(at_box.size):
+        flat[at_box[k]] = vals[k]
     convolve(box, 0, h, spec, out, sym, threaded)
-    for k in range(idx.size):
-        f = idx[k]
-        res[k] = out[f // n - i0, f % n - j0]
+    flat_out = out.reshape(-1)
+    for k in range(at_out.size):
+        res[k] = flat_out[at_out[k]]
 
 
 @njit(**NUMBA_OPTS)
 def _fft_box(idx, n, syms, isyms, cut2, spacing, diag0):
-    """Bounding box of idx on the n x n grid, its FFT size P, symbol and inverse symbol."""
+    """The bounding box of idx on the n x n grid (width w, h rows), its FFT size P, symbol
+    and inverse symbol, and where each spring of idx sits in the box and in the transform
+    output (at_box, at_out). Made once per solve: an integer division per spring and
+    application cost a quarter of a CG iteration at 1/256."""
     i0, j0, w, h = index_box(n, idx)
     P = fast_len(2 * w - 1)
     sym, isym = box_symbols(syms, isyms, P, cut2, spacing, diag0)
-    return i0, j0, w, h, P, sym, isym
+    at_box = np.empty(idx.size, dtype=np.int64)
+    at_out = np.empty(idx.size, dtype=np.int64)
+    for k in range(idx.size):
+        i = idx[k] // n - i0
+        j = idx[k] % n - j0
+        at_box[k] = i * w + j
+        at_out[k] = i * P + j
+    return w, h, P, sym, isym, at_box, at_out
 
 
 # ---------------------------------------------------------------- the operator
@@ -185,18 +196,20 @@ def field(op, ws, idx, vals, u):
 
 # The FFT operator on the square grid: the contact's bounding box, zero-padded to P.
 def _fft_restrict(op, idx):
-    i0, j0, w, h, P, sym, isym = _fft_box(idx, op.n, op.syms, op.isyms, op.cut2, op.spacing, op.diag[0])
-    return (i0, j0, h, sym, np.zeros((w, w)), np.zeros((w, P // 2 + 1), dtype=np.complex128),
+    w, h, P, sym, isym, at_box, at_out = _fft_box(idx, op.n, op.syms, op.isyms, op.cut2, op.spacing,
+                                                  op.diag[0])
+    return (h, sym, at_box, at_out, np.zeros((w, w)), np.zeros((w, P // 2 + 1), dtype=np.complex128),
             np.empty((w, P)))
 
 
 def _fft_apply(op, ws, idx, vals, res):
-    i0, j0, h, sym, box, spec, out = ws
-    box_apply_set(sym, idx, vals, op.n, i0, j0, h, box, spec, out, res, op.threaded)
+    h, sym, at_box, at_out, box, spec, out = ws
+    box_apply_set(sym, at_box, at_out, vals, h, box, spec, out, res, op.threaded)
 
 
 def _fft_field(op, ws, idx, vals, u):
-    field_on_grid(idx, vals, op.n, op.sym_full, op.src, op.spec, op.out, u, op.threaded)
+    field_on_grid(idx, vals, op.n, op.syms, op.isyms, op.cut2, op.spacing, op.diag[0], op.src,
+                  op.spec, op.out, u, op.threaded)
 
 
 # The direct sums (tfm.operators.DirectOperator.apply: the same kernels, the same order).
@@ -299,23 +312,44 @@ overload(field, jit_options=NUMBA_OPTS)(lambda op, ws, idx, vals, u: _impl(op, 2
 
 
 @njit(**NUMBA_OPTS)
-def field_on_grid(idx, vals, n, sym_full, src, spec, out, u, threaded):
+def field_box(n, need):
+    """The smallest box size P >= need on the ladder config.FIELD_BOX_FRACTIONS of the
+    whole grid's fast_len(2 n - 1)."""
+    full = fast_len(2 * n - 1)
+    for f in FIELD_BOX_FRACTIONS:
+        P = fast_len(int(np.ceil(f * full)))
+        if P >= need:
+            return min(P, full)
+    return full
+
+
+@njit(**NUMBA_OPTS)
+def field_on_grid(idx, vals, n, syms, isyms, cut2, spacing, diag0, src, spec, out, u, threaded):
     """u = C F on the whole n x n grid for forces vals on the springs idx (F = 0 elsewhere).
 
-    The box is the grid itself (width n, P = sym_full.shape[0]); only the rows holding
-    sources are transformed forward."""
+    Every target-source offset is at most H = grid_reach(n, idx), so a periodic box of
+    P >= 2 H + 1 has no images: for a contact in the middle of the grid P ~ n + w, not
+    2 n. P is the smallest such rung of field_box. ``spec`` and ``out`` are buffers for
+    P = fast_len(2 n - 1), used in part for smaller P; only the rows holding sources are
+    transformed forward."""
     u[:] = 0.0
     if idx.size == 0:
         return
+    P = field_box(n, 2 * grid_reach(n, idx) + 1)
+    if P not in syms:
+        syms[P] = symbol(cut2, spacing, diag0, P)     # the inverse is not needed here
+    sym = syms[P]
+    spec_p = spec.reshape(-1)[:n * (P // 2 + 1)].reshape((n, P // 2 + 1))
+    out_p = out.reshape(-1)[:n * P].reshape((n, P))
     r0 = idx[0] // n
     r1 = idx[idx.size - 1] // n + 1
     src[r0:r1] = 0.0
     for k in range(idx.size):
         src[idx[k] // n, idx[k] % n] = vals[k]
-    convolve(src, r0, r1, spec, out, sym_full, threaded)
+    convolve(src, r0, r1, spec_p, out_p, sym, threaded)
     for i in range(n):
         for j in range(n):
-            u[i * n + j] = out[i, j]
+            u[i * n + j] = out_p[i, j]
 
 
 # ---------------------------------------------------------------- the preconditioner
@@ -324,20 +358,21 @@ def restrict_pre(pre, idx):
     """M restricted to idx: for PRE_FFT the box's inverse symbol and transform buffers
     (in the preconditioner's precision); empty for the others."""
     if pre.kind == PRE_FFT:
-        i0, j0, w, h, P, sym, isym = _fft_box(idx, pre.n, pre.syms, pre.isyms, pre.cut2,
-                                              pre.spacing, pre.diag0)
-        return (i0, j0, h, isym, np.zeros((w, w), dtype=isym.dtype),
+        w, h, P, sym, isym, at_box, at_out = _fft_box(idx, pre.n, pre.syms, pre.isyms, pre.cut2,
+                                                      pre.spacing, pre.diag0)
+        return (h, isym, at_box, at_out, np.zeros((w, w), dtype=isym.dtype),
                 np.zeros((w, P // 2 + 1), dtype=PRECOND_CDTYPE), np.empty((w, P), dtype=isym.dtype))
     isym = np.zeros((1, 1), dtype=PRECOND_DTYPE)
-    return (0, 0, 0, isym, isym.copy(), np.zeros((1, 1), dtype=PRECOND_CDTYPE), isym.copy())
+    none = np.zeros(0, dtype=np.int64)
+    return (0, isym, none, none, isym.copy(), np.zeros((1, 1), dtype=PRECOND_CDTYPE), isym.copy())
 
 
 @njit(**NUMBA_OPTS)
 def precondition(pre, pws, idx, r, z):
     """z = M r on the contact set idx."""
     if pre.kind == PRE_FFT:
-        i0, j0, h, isym, box, spec, out = pws
-        box_apply_set(isym, idx, r, pre.n, i0, j0, h, box, spec, out, z, pre.threaded)
+        h, isym, at_box, at_out, box, spec, out = pws
+        box_apply_set(isym, at_box, at_out, r, h, box, spec, out, z, pre.threaded)
     elif pre.kind == PRE_DIAGONAL:
         for k in range(idx.size):
             z[k] = pre.inv_diag[idx[k]] * r[k]
