@@ -71,29 +71,29 @@ def operator_table(sizes=(128, 256, 512), direct_max=256, repeats=5):
     return rows
 
 
-def fft_table(widths=(64, 96, 128, 160, 240, 320, 480), repeats=200, chunks=(16, 32)):
-    """One compiled convolution of a full w x w box (P = fast_len(2w - 1)) in chunks of
-    each length in ``chunks`` (tfm.kernels.fft.CHUNK is the engine's): median ms on one
+def fft_table(widths=(64, 96, 128, 160, 240, 320, 480), repeats=200):
+    """One compiled convolution of a full w x w box (P = fast_len(2w - 1)): median ms on one
     thread and spread over the Numba threads, the choice tfm.kernels.fft.convolve makes.
-    The four ways are timed in turn, call by call, so a change of the machine's speed
-    falls on all of them alike."""
-    from tfm.kernels.fft import _stages_parallel, _stages_serial, fast_len, symbol
+    The two ways are timed in turn, call by call, so a change of the machine's speed falls
+    on both alike."""
+    import numba
+
+    from tfm.kernels.fft import buffers, convolve, fast_len, symbol
     rows = []
     for w in widths:
         P = fast_len(2 * w - 1)
         sym = symbol(1e300, 1.0 / 512, 3.8, P)
-        src = np.random.default_rng(0).random((w, w))
-        spec = np.zeros((w, P // 2 + 1), dtype=complex)
-        out = np.empty((w, P))
-        ways = [(stages, c) for c in chunks for stages in (_stages_serial, _stages_parallel)]
+        src, spec, col, out = buffers(w, P)
+        src[:, :w] = np.random.default_rng(0).random((w, w))
+        ways = (1, numba.get_num_threads())
         times = {way: [] for way in ways}
         for k in range(repeats + 1):             # call 0 warms up (compilation, plans)
-            for stages, c in ways:
+            for way in ways:
                 t = time.perf_counter()
-                stages(src, 0, w, spec, out, P, sym, c)
+                convolve(src, 0, w, spec, col, out, sym, way)
                 if k:
-                    times[(stages, c)].append(time.perf_counter() - t)
-        rows.append((w, P, [1e3 * statistics.median(times[way]) for way in ways]))
+                    times[way].append(time.perf_counter() - t)
+        rows.append((w, P, *[1e3 * statistics.median(times[way]) for way in ways]))
     return rows
 
 
@@ -295,17 +295,12 @@ def main(argv=None):
         print()
     if args.only in (None, "fft"):
         import numba
-
-        from tfm.kernels.fft import CHUNK
-        chunks = (16, 32)
-        print(f"## One compiled convolution in chunks of 16 and 32 transforms (the engine: {CHUNK}), "
-              f"one thread and {numba.get_num_threads()} (median ms; threaded from P = 192)\n")
-        print("| box w | P | " + " | ".join(f"{c}: 1 thread | {c}: threaded" for c in chunks)
-              + " | 1 thread 16/32 | threaded 16/32 |")
-        print("|---|---|" + "---|---|" * len(chunks) + "---|---|")
-        for w, P, t in fft_table(repeats=50 if args.quick else 200, chunks=chunks):
-            print(f"| {w} | {P} | " + " | ".join(f"{x:.3f}" for x in t)
-                  + f" | {t[0] / t[2]:.2f}x | {t[1] / t[3]:.2f}x |")
+        print(f"## One compiled convolution: one thread against {numba.get_num_threads()} "
+              "(median ms; threaded from P = 192)\n")
+        print("| box w | P | 1 thread | threaded | ratio |")
+        print("|---|---|---|---|---|")
+        for w, P, t1, tn in fft_table(repeats=50 if args.quick else 200):
+            print(f"| {w} | {P} | {t1:.3f} | {tn:.3f} | {t1 / tn:.2f}x |")
         print()
     if args.only in (None, "operators"):
         sizes = (64, 128) if args.quick else (128, 256, 512)

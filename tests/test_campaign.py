@@ -525,7 +525,7 @@ def test_killing_the_campaign_stops_its_workers(tmp_path):
     # 1/256 runs take seconds each, so a worker still alive 3 s after its parent died
     # would be one computing on as an orphan
     path.write_text('name = "orphans"\n[base]\nspacing = "1/256"\nk_th = 0.02\nshape = "paraboloid"\n'
-                    'max_indent = 0.05\nstep = 2.5e-4\n[sweep]\nalpha = [0.5, 0.6]\n')
+                    'max_indent = 0.05\nstep = 2.5e-4\n[sweep]\nalpha = [0.5, 0.6, 0.7, 0.8]\n')
     proc = subprocess.Popen([sys.executable, "-m", "tfm", "campaign", "run", str(path), "--jobs", "2",
                              "--results-dir", str(tmp_path), "--quiet"],
                             cwd=REPO, env={**os.environ, "CI": "true", "PYTHONPATH": str(REPO)},
@@ -534,10 +534,13 @@ def test_killing_the_campaign_stops_its_workers(tmp_path):
     try:
         while True:                      # until both workers have computed for a while
             assert proc.poll() is None and time.monotonic() < deadline
-            workers = [c for c in psutil.Process(proc.pid).children()
-                       if "spawn_main" in " ".join(c.cmdline())]
-            if len(workers) == 2 and all(w.cpu_times().user > 1.0 for w in workers):
-                break
+            try:
+                workers = [c for c in psutil.Process(proc.pid).children()
+                           if "spawn_main" in " ".join(c.cmdline())]
+                if len(workers) == 2 and all(w.cpu_times().user > 1.0 for w in workers):
+                    break
+            except psutil.NoSuchProcess:     # a child listed a moment ago has ended: look again
+                pass
             time.sleep(0.05)
         proc.terminate()
         proc.wait(timeout=30)

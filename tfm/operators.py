@@ -105,14 +105,17 @@ class FFTOperator:
             self._threads_pay = fftk.threads_pay(self.n, sym, numba.get_num_threads())
         return self._threads_pay
 
+    def threads(self) -> int:
+        """Numba threads for the large transforms: all of them if threaded(), else 1."""
+        return numba.get_num_threads() if self.threaded() else 1
+
     def compiled(self) -> FFTData:
         """The operator's data for the compiled loop, with buffers for the whole-grid field."""
         start_threads()
         n = self.n
         P = fftk.fast_len(2 * n - 1)
         return FFTData(n, self.spacing, self.cut2, self.diag, self.syms, self.isyms, self.symbols(P)[0],
-                       np.zeros((n, n)), np.zeros((n, P // 2 + 1), dtype=np.complex128),
-                       np.empty((n, P)), self.threaded())
+                       *fftk.buffers(n, P), self.threads())
 
     def apply_inverse(self, src, f_src, tgt=None):
         """C^-1 on the box of src and tgt (the FFT preconditioner): same transforms."""
@@ -132,7 +135,7 @@ class FFTOperator:
         w = max(w, 1)
         sym = self.symbols(fftk.fast_len(2 * w - 1))[which]
         return fftk.box_apply(sym, src, np.ascontiguousarray(f_src, dtype=float), tgt, n, i0, j0, w,
-                              self.threaded())
+                              self.threads())
 
 
 class DirectOperator:
@@ -244,7 +247,7 @@ class FFTPreconditioner:
     def compiled(self) -> PreData:
         op = self.op
         return pre_data(PRE_FFT, n=op.n, spacing=op.spacing, cut2=op.cut2, diag0=float(op.diag[0]),
-                        syms=op.syms, isyms=op.isyms, threaded=op.threaded())
+                        syms=op.syms, isyms=op.isyms, threads=op.threads())
 
 
 class DiagonalPreconditioner:
@@ -261,13 +264,13 @@ class DiagonalPreconditioner:
 
 
 def pre_data(kind=PRE_NONE, inv_diag=None, stencil=None, n=0, spacing=0.0, cut2=0.0, diag0=0.0,
-             syms=None, isyms=None, threaded=False) -> PreData:
+             syms=None, isyms=None, threads=1) -> PreData:
     """PreData with empty stand-ins for what the kind does not use (Numba needs one type)."""
     if syms is None:
         syms, isyms = new_symbol_cache(0, np.ones((1, 1)))
     return PreData(kind, np.ascontiguousarray(np.ones(1) if inv_diag is None else inv_diag, dtype=float),
                    np.ascontiguousarray(np.zeros((1, 1)) if stencil is None else stencil, dtype=float),
-                   int(n), float(spacing), float(cut2), float(diag0), syms, isyms, bool(threaded))
+                   int(n), float(spacing), float(cut2), float(diag0), syms, isyms, int(threads))
 
 
 def make_preconditioner(p: Params, spec: KernelSpec, layout: Layout, symbol=None, operator=None):

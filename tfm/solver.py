@@ -143,14 +143,14 @@ class ContactState:
     @property
     def threaded(self) -> bool:
         """Whether the large transforms are spread over the Numba threads (same bits)."""
-        return getattr(self._op, "threaded", False)
+        return getattr(self._op, "threads", 1) > 1
 
     @threaded.setter
     def threaded(self, value: bool):
         if isinstance(self._op, FFTData):
-            self._op = self._op._replace(threaded=bool(value))
+            self._op = self._op._replace(threads=numba.get_num_threads() if value else 1)
         if self._pre.kind == PRE_FFT:
-            self._pre = self._pre._replace(threaded=bool(value))
+            self._pre = self._pre._replace(threads=numba.get_num_threads() if value else 1)
 
     def _rounds(self, d, guess, u_guess, out, solved=False):
         prob = self.prob

@@ -1,14 +1,16 @@
 """Compiled zero-padded FFT convolution with the compliance, on a square box of the grid.
 
-rocket-fft registers scipy.fft inside @njit, so the contact solve can call pocketfft
-without returning to Python. A linear convolution of a W x W box needs a periodic box
+rocket-fft's low-level transforms (rocket_fft.r2c, c2c, c2r) call pocketfft from @njit
+code and write into the caller's arrays, so the contact solve never returns to Python and
+a convolution allocates nothing. A linear convolution of a W x W box needs a periodic box
 P >= 2 W - 1 (no images); the transform is pruned: only the rows that hold sources are
 transformed along the rows, and only the W wanted rows are transformed back.
 
-Threads: the 1-D transforms are cut into fixed chunks of CHUNK rows or columns, and each
-chunk is one single-threaded pocketfft call. Which thread runs a chunk changes nothing,
-so the result is bitwise the same for any thread count (pocketfft's own workers= would
-regroup the transforms into SIMD bundles by thread, which changes the last bits).
+Threads: each stage's 1-D transforms are cut into one part per Numba thread, each part one
+single-threaded pocketfft call. pocketfft works through a call's transforms in SIMD
+bundles; parts cut at multiples of ALIGN leave the bundles whole, and the result is then
+bitwise that of one call over all of them (tests/test_engine.py), for any thread count.
+(pocketfft's own threads cut the bundles where they like, which changes the last bits.)
 """
 import time
 
@@ -16,13 +18,18 @@ import numpy as np
 import rocket_fft  # noqa: F401  (registers scipy.fft for Numba)
 import scipy.fft as sfft
 from numba import njit, prange
+from rocket_fft import c2c, c2r, r2c
 
 from ..config import FFT_THREADED_SIZE, NUMBA_OPTS, PARALLEL_OPTS
 from .compliance import offdiag
 
-CHUNK = 16               # 1-D transforms per pocketfft call (fixed: see the docstring)
-CHUNKED_SIZE = 192       # P from which the transforms go in chunks (cache-friendly columns)
+# Parts of a stage start at multiples of ALIGN transforms: pocketfft bundles 2, 4 or 8 of
+# them (SSE2, AVX2, AVX-512 doubles); cuts at multiples of 4 kept the bits in every case
+# tried, cuts at any place did not (P = 320).
+ALIGN = 8
 THREADED_SIZE = FFT_THREADED_SIZE
+AXIS0 = np.array([0], dtype=np.int64)
+AXIS1 = np.array([1], dtype=np.int64)
 
 
 @njit(**NUMBA_OPTS)
@@ -62,109 +69,113 @@ def symbol(cut2, spacing, diag0, P):
 
 
 @njit(**NUMBA_OPTS)
-def _rows_forward(src, r0, r1, spec, P, c, chunk):
-    lo = r0 + c * chunk
-    hi = min(r1, lo + chunk)
-    spec[lo:hi] = sfft.rfft(src[lo:hi], n=P, axis=1)
+def _cut(n, k, parts):
+    """Start of part k of range(n) cut into ``parts`` (k = parts gives n), at a multiple of
+    ALIGN, as even as that allows."""
+    if k >= parts:
+        return n
+    return min(n, ((n * k // parts + ALIGN // 2) // ALIGN) * ALIGN)
 
 
 @njit(**NUMBA_OPTS)
-def _columns(spec, W, sym, c, chunk):
-    lo = c * chunk
-    hi = min(spec.shape[1], lo + chunk)
-    col = sfft.fft(spec[:W, lo:hi], n=sym.shape[0], axis=0)
-    col *= sym[:, lo:hi]
-    spec[:W, lo:hi] = sfft.ifft(col, axis=0)[:W]
+def _rows_forward(src, spec, lo, hi):
+    if hi > lo:
+        r2c(src[lo:hi], spec[lo:hi], AXIS1, True, 1.0, 1)
 
 
 @njit(**NUMBA_OPTS)
-def _rows_inverse(spec, out, P, c, chunk):
-    lo = c * chunk
-    hi = min(out.shape[0], lo + chunk)
-    out[lo:hi] = sfft.irfft(spec[lo:hi], n=P, axis=1)
+def _columns(spec, col, sym, lo, hi):
+    """Columns lo:hi: forward (spec's W rows zero-padded to P), times the symbol, back."""
+    if hi > lo:
+        c2c(spec[:, lo:hi], col[:, lo:hi], AXIS0, True, 1.0, 1)
+        for i in range(col.shape[0]):
+            for j in range(lo, hi):
+                col[i, j] *= sym[i, j]
+        c2c(col[:, lo:hi], col[:, lo:hi], AXIS0, False, 1.0, 1)
 
 
-# The same three stages twice: serial (no thread start-up for small boxes) and parallel.
-# ``chunk`` is CHUNK in the engine (an argument so that the bench can compare lengths).
 @njit(**NUMBA_OPTS)
-def _stages_serial(src, r0, r1, spec, out, P, sym, chunk):
-    W = out.shape[0]
-    for c in range((r1 - r0 + chunk - 1) // chunk):
-        _rows_forward(src, r0, r1, spec, P, c, chunk)
-    for c in range((spec.shape[1] + chunk - 1) // chunk):
-        _columns(spec, W, sym, c, chunk)
-    for c in range((W + chunk - 1) // chunk):
-        _rows_inverse(spec, out, P, c, chunk)
+def _rows_inverse(col, out, lo, hi):
+    if hi > lo:
+        P = out.shape[1]
+        c2r(col[lo:hi], out[lo:hi], AXIS1, False, 1.0 / (P * P), 1)
+
+
+# The three stages twice: whole calls on one thread, and in ``parts`` parts over the Numba
+# threads (one per thread; the count is passed in: read in jitted code, it would make the
+# kernels uncacheable).
+@njit(**NUMBA_OPTS)
+def _stages_serial(src, r0, r1, spec, col, out, sym):
+    _rows_forward(src, spec, r0, r1)
+    _columns(spec, col, sym, 0, spec.shape[1])
+    _rows_inverse(col, out, 0, out.shape[0])
 
 
 @njit(**PARALLEL_OPTS)
-def _stages_parallel(src, r0, r1, spec, out, P, sym, chunk):
+def _stages_parallel(src, r0, r1, spec, col, out, sym, parts):
+    for k in prange(parts):
+        _rows_forward(src, spec, r0 + _cut(r1 - r0, k, parts), r0 + _cut(r1 - r0, k + 1, parts))
+    H = spec.shape[1]
+    for k in prange(parts):
+        _columns(spec, col, sym, _cut(H, k, parts), _cut(H, k + 1, parts))
     W = out.shape[0]
-    for c in prange((r1 - r0 + chunk - 1) // chunk):
-        _rows_forward(src, r0, r1, spec, P, c, chunk)
-    for c in prange((spec.shape[1] + chunk - 1) // chunk):
-        _columns(spec, W, sym, c, chunk)
-    for c in prange((W + chunk - 1) // chunk):
-        _rows_inverse(spec, out, P, c, chunk)
+    for k in prange(parts):
+        _rows_inverse(col, out, _cut(W, k, parts), _cut(W, k + 1, parts))
 
 
 def threads_pay(w, sym, threads, repeats=5):
-    """Whether spreading the chunks over ``threads`` Numba threads is faster, timed now on
+    """Whether spreading the stages over ``threads`` Numba threads is faster, timed now on
     a w x w box with the symbol ``sym`` (``repeats`` calls each way, a few ms). The bits
-    are the same either way, so the choice is free; it matters on a busy machine, where a barrier can wait a scheduler
-    slice (`python -m bench.run_bench --only fft` with two other jobs running: one
-    convolution at P = 480 took 24 ms threaded against 2.4 ms on one thread)."""
+    are the same either way, so the choice is free; it matters on a busy machine, where a
+    barrier can wait a scheduler slice (`python -m bench.run_bench --only fft` with two
+    other jobs running: one convolution at P = 480 took 24 ms threaded against 2.4 ms on
+    one thread)."""
     P = sym.shape[0]
     if threads < 2 or P < THREADED_SIZE:
         return False
-    src = np.random.default_rng(0).random((w, w))
-    spec = np.zeros((w, P // 2 + 1), dtype=np.complex128)
-    out = np.empty((w, P))
-    times = {_stages_serial: [], _stages_parallel: []}
+    src, spec, col, out = buffers(w, P)
+    src[:, :w] = np.random.default_rng(0).random((w, w))
+    times = {1: [], threads: []}
     for k in range(repeats + 1):          # round 0 warms up the thread pool
-        for stages, kept in times.items():
+        for parts, kept in times.items():
             t = time.perf_counter()
-            stages(src, 0, w, spec, out, P, sym, CHUNK)
+            convolve(src, 0, w, spec, col, out, sym, parts)
             if k:
                 kept.append(time.perf_counter() - t)
     # medians: a lucky threaded call must not hide the barriers' waits under load
-    return float(np.median(times[_stages_parallel])) < 0.9 * float(np.median(times[_stages_serial]))
+    return float(np.median(times[threads])) < 0.9 * float(np.median(times[1]))
 
 
 @njit(**NUMBA_OPTS)
-def convolve(src, r0, r1, spec, out, sym, threaded):
-    """out[:W, :W] = (K * src) on a W x W box, src zero outside rows r0:r1.
+def buffers(W, P):
+    """Zeroed work arrays of a convolution of a W x W box on the P x P periodic box: the
+    sources (W x P: columns from W on stay zero), the rows' spectra, the columns' and the
+    result."""
+    return (np.zeros((W, P)), np.zeros((W, P // 2 + 1), dtype=np.complex128),
+            np.zeros((P, P // 2 + 1), dtype=np.complex128), np.zeros((W, P)))
 
-    ``spec`` (W x (P//2 + 1) complex) and ``out`` (W x P) are work buffers. Small boxes
-    take whole-array transforms (fewer calls; bench: faster below P ~ 200), large ones the
-    fixed chunks (cache-friendly columns), spread over the Numba threads from THREADED_SIZE
-    if ``threaded`` (decided in Python by threads_pay: a thread count read in jitted code
-    would make the kernels uncacheable). Whether chunks are used depends on P only, and
-    chunks give the same bits serial or threaded."""
+
+@njit(**NUMBA_OPTS)
+def convolve(src, r0, r1, spec, col, out, sym, threads):
+    """out[:W, :W] = (K * src) on a W x W box: src (W x P) zero outside rows r0:r1 and
+    columns from W on; spec, col and out as made by ``buffers``. Cut into ``threads``
+    parts over the Numba threads from THREADED_SIZE if threads > 1 (decided in Python by
+    threads_pay); the bits are the same either way."""
     P = sym.shape[0]
-    if P >= CHUNKED_SIZE:
-        spec[:r0] = 0.0
-        spec[r1:] = 0.0
-        if threaded and P >= THREADED_SIZE:
-            _stages_parallel(src, r0, r1, spec, out, P, sym, CHUNK)
-        else:
-            _stages_serial(src, r0, r1, spec, out, P, sym, CHUNK)
-        return
-    W = out.shape[0]
-    a = sfft.rfft(src[r0:r1], n=P, axis=1)
-    col = np.zeros((P, P // 2 + 1), dtype=a.dtype)
-    col[r0:r1] = a
-    col = sfft.fft(col, axis=0)
-    col *= sym
-    out[:] = sfft.irfft(sfft.ifft(col, axis=0)[:W], n=P, axis=1)
+    spec[:r0] = 0.0
+    spec[r1:] = 0.0
+    if threads > 1 and P >= THREADED_SIZE:
+        _stages_parallel(src, r0, r1, spec, col, out, sym, threads)
+    else:
+        _stages_serial(src, r0, r1, spec, col, out, sym)
 
 
 @njit(**NUMBA_OPTS)
-def box_apply(sym, src, vals, tgt, n, i0, j0, w, threaded):
+def box_apply(sym, src, vals, tgt, n, i0, j0, w, threads):
     """u at the flat grid indices tgt of C applied to vals at src, on the w x w box at
     (i0, j0) that holds both (P = sym.shape[0] >= 2 w - 1)."""
     P = sym.shape[0]
-    box = np.zeros((w, w))
+    box, spec, col, out = buffers(w, P)
     r0 = w
     r1 = 0
     for k in range(src.size):
@@ -175,9 +186,7 @@ def box_apply(sym, src, vals, tgt, n, i0, j0, w, threaded):
     res = np.zeros(tgt.size)
     if r1 <= r0:
         return res
-    spec = np.empty((w, P // 2 + 1), dtype=np.complex128)
-    out = np.empty((w, P))
-    convolve(box, r0, r1, spec, out, sym, threaded)
+    convolve(box, r0, r1, spec, col, out, sym, threads)
     for k in range(tgt.size):
         res[k] = out[tgt[k] // n - i0, tgt[k] % n - j0]
     return res

@@ -27,17 +27,11 @@ from numba.typed import Dict
 
 from ..config import FIELD_BOX_FRACTIONS, NUMBA_OPTS
 from .direct import _pair_sums
-from .fft import convolve, fast_len, symbol
+from .fft import buffers, convolve, fast_len, symbol
 from .grid import grid_reach, index_box, stencil_apply
 from .tree import (MORTON_BITS, build_nodes, csr_apply, evaluate, node_boxes, node_geometry,
                    node_moments, subset_order)
 
-# The FFT preconditioner in single precision (off: at 1/128 it cost 5 % more CG iterations
-# and saved no measurable time on the shared 2-core machine). Only the preconditioner:
-# residuals, operator and iterates stay double.
-PRECOND_SINGLE = False
-PRECOND_DTYPE = np.float32 if PRECOND_SINGLE else np.float64
-PRECOND_CDTYPE = np.complex64 if PRECOND_SINGLE else np.complex128
 # preconditioner codes
 PRE_NONE, PRE_DIAGONAL, PRE_FFT, PRE_STENCIL = 0, 1, 2, 3
 
@@ -51,10 +45,11 @@ class FFTData(NamedTuple):
     syms: object            # typed dict P -> symbol (shared with the operator)
     isyms: object           # typed dict P -> inverse symbol
     sym_full: np.ndarray    # symbol of the whole grid's box, P = fast_len(2 n - 1)
-    src: np.ndarray         # work buffers of the whole-grid field (sized for that P)
+    src: np.ndarray         # work buffers of the whole-grid field (fft.buffers(n, P))
     spec: np.ndarray
+    col: np.ndarray
     out: np.ndarray
-    threaded: bool          # spread large transforms over the Numba threads
+    threads: int            # Numba threads for large transforms (1: one)
 
 
 class DirectData(NamedTuple):
@@ -106,7 +101,7 @@ class PreData(NamedTuple):
     diag0: float
     syms: object
     isyms: object
-    threaded: bool
+    threads: int
 
 
 def start_threads():
@@ -118,7 +113,6 @@ def start_threads():
 
 # ---------------------------------------------------------------- symbols on a box
 SYMBOL_ARRAY = types.float64[:, ::1]
-PRECOND_ARRAY = types.Array(types.float32 if PRECOND_SINGLE else types.float64, 2, "C")
 
 
 @njit(**NUMBA_OPTS)
@@ -128,10 +122,10 @@ def new_symbol_cache(P, sym):
     Made in compiled code: filling a typed dict from Python compiles its methods anew in
     every process (about 1.7 s of a 1/128 run's start-up)."""
     syms = Dict.empty(key_type=types.int64, value_type=SYMBOL_ARRAY)
-    isyms = Dict.empty(key_type=types.int64, value_type=PRECOND_ARRAY)
+    isyms = Dict.empty(key_type=types.int64, value_type=SYMBOL_ARRAY)
     if P > 0:
         syms[P] = sym
-        isyms[P] = (1.0 / sym).astype(PRECOND_DTYPE)
+        isyms[P] = 1.0 / sym
     return syms, isyms
 
 
@@ -141,41 +135,37 @@ def box_symbols(syms, isyms, P, cut2, spacing, diag0):
     if P not in syms:
         syms[P] = symbol(cut2, spacing, diag0, P)
     if P not in isyms:
-        isyms[P] = (1.0 / syms[P]).astype(PRECOND_DTYPE)
+        isyms[P] = 1.0 / syms[P]
     return syms[P], isyms[P]
 
 
 @njit(**NUMBA_OPTS)
-def box_apply_set(sym, at_box, at_out, vals, h, box, spec, out, res, threaded):
-    """res = K vals for springs at the flat positions at_box of the w x w box (the first h
-    rows hold them) and at_out of the w x P transform output, K given by its symbol. Only
-    these positions of ``box`` are ever written in a solve, so the rest stays zero."""
+def box_apply_set(sym, at, vals, h, box, spec, col, out, res, threads):
+    """res = K vals for springs at the flat positions ``at`` of the W x P box (the first h
+    rows hold them; the transform's output has the same layout), K given by its symbol.
+    Only these positions of ``box`` are ever written in a solve, so the rest stays zero."""
     flat = box.reshape(-1)
-    for k in range(at_box.size):
-        flat[at_box[k]] = vals[k]
-    convolve(box, 0, h, spec, out, sym, threaded)
+    for k in range(at.size):
+        flat[at[k]] = vals[k]
+    convolve(box, 0, h, spec, col, out, sym, threads)
     flat_out = out.reshape(-1)
-    for k in range(at_out.size):
-        res[k] = flat_out[at_out[k]]
+    for k in range(at.size):
+        res[k] = flat_out[at[k]]
 
 
 @njit(**NUMBA_OPTS)
 def _fft_box(idx, n, syms, isyms, cut2, spacing, diag0):
     """The bounding box of idx on the n x n grid (width w, h rows), its FFT size P, symbol
-    and inverse symbol, and where each spring of idx sits in the box and in the transform
-    output (at_box, at_out). Made once per solve: an integer division per spring and
-    application cost a quarter of a CG iteration at 1/256."""
+    and inverse symbol, and where each spring of idx sits in the w x P box (``at``). Made
+    once per solve: an integer division per spring and application cost a quarter of a CG
+    iteration at 1/256."""
     i0, j0, w, h = index_box(n, idx)
     P = fast_len(2 * w - 1)
     sym, isym = box_symbols(syms, isyms, P, cut2, spacing, diag0)
-    at_box = np.empty(idx.size, dtype=np.int64)
-    at_out = np.empty(idx.size, dtype=np.int64)
+    at = np.empty(idx.size, dtype=np.int64)
     for k in range(idx.size):
-        i = idx[k] // n - i0
-        j = idx[k] % n - j0
-        at_box[k] = i * w + j
-        at_out[k] = i * P + j
-    return w, h, P, sym, isym, at_box, at_out
+        at[k] = (idx[k] // n - i0) * P + idx[k] % n - j0
+    return w, h, P, sym, isym, at
 
 
 # ---------------------------------------------------------------- the operator
@@ -196,20 +186,18 @@ def field(op, ws, idx, vals, u):
 
 # The FFT operator on the square grid: the contact's bounding box, zero-padded to P.
 def _fft_restrict(op, idx):
-    w, h, P, sym, isym, at_box, at_out = _fft_box(idx, op.n, op.syms, op.isyms, op.cut2, op.spacing,
-                                                  op.diag[0])
-    return (h, sym, at_box, at_out, np.zeros((w, w)), np.zeros((w, P // 2 + 1), dtype=np.complex128),
-            np.empty((w, P)))
+    w, h, P, sym, isym, at = _fft_box(idx, op.n, op.syms, op.isyms, op.cut2, op.spacing, op.diag[0])
+    return (h, sym, at) + buffers(w, P)
 
 
 def _fft_apply(op, ws, idx, vals, res):
-    h, sym, at_box, at_out, box, spec, out = ws
-    box_apply_set(sym, at_box, at_out, vals, h, box, spec, out, res, op.threaded)
+    h, sym, at, box, spec, col, out = ws
+    box_apply_set(sym, at, vals, h, box, spec, col, out, res, op.threads)
 
 
 def _fft_field(op, ws, idx, vals, u):
-    field_on_grid(idx, vals, op.n, op.syms, op.isyms, op.cut2, op.spacing, op.diag[0], op.src,
-                  op.spec, op.out, u, op.threaded)
+    field_on_grid(idx, vals, op.n, op.syms, op.cut2, op.spacing, op.diag[0], op.src, op.spec,
+                  op.col, op.out, u, op.threads)
 
 
 # The direct sums (tfm.operators.DirectOperator.apply: the same kernels, the same order).
@@ -324,13 +312,13 @@ def field_box(n, need):
 
 
 @njit(**NUMBA_OPTS)
-def field_on_grid(idx, vals, n, syms, isyms, cut2, spacing, diag0, src, spec, out, u, threaded):
+def field_on_grid(idx, vals, n, syms, cut2, spacing, diag0, src, spec, col, out, u, threads):
     """u = C F on the whole n x n grid for forces vals on the springs idx (F = 0 elsewhere).
 
     Every target-source offset is at most H = grid_reach(n, idx), so a periodic box of
     P >= 2 H + 1 has no images: for a contact in the middle of the grid P ~ n + w, not
-    2 n. P is the smallest such rung of field_box. ``spec`` and ``out`` are buffers for
-    P = fast_len(2 n - 1), used in part for smaller P; only the rows holding sources are
+    2 n. P is the smallest such rung of field_box. The buffers (``buffers(n, P)`` for
+    P = fast_len(2 n - 1)) serve smaller P in part; only the rows holding sources are
     transformed forward."""
     u[:] = 0.0
     if idx.size == 0:
@@ -338,15 +326,16 @@ def field_on_grid(idx, vals, n, syms, isyms, cut2, spacing, diag0, src, spec, ou
     P = field_box(n, 2 * grid_reach(n, idx) + 1)
     if P not in syms:
         syms[P] = symbol(cut2, spacing, diag0, P)     # the inverse is not needed here
-    sym = syms[P]
+    src_p = src.reshape(-1)[:n * P].reshape((n, P))
     spec_p = spec.reshape(-1)[:n * (P // 2 + 1)].reshape((n, P // 2 + 1))
+    col_p = col.reshape(-1)[:P * (P // 2 + 1)].reshape((P, P // 2 + 1))
     out_p = out.reshape(-1)[:n * P].reshape((n, P))
     r0 = idx[0] // n
     r1 = idx[idx.size - 1] // n + 1
-    src[r0:r1] = 0.0
+    src_p[r0:r1] = 0.0
     for k in range(idx.size):
-        src[idx[k] // n, idx[k] % n] = vals[k]
-    convolve(src, r0, r1, spec_p, out_p, sym, threaded)
+        src_p[idx[k] // n, idx[k] % n] = vals[k]
+    convolve(src_p, r0, r1, spec_p, col_p, out_p, syms[P], threads)
     for i in range(n):
         for j in range(n):
             u[i * n + j] = out_p[i, j]
@@ -355,24 +344,21 @@ def field_on_grid(idx, vals, n, syms, isyms, cut2, spacing, diag0, src, spec, ou
 # ---------------------------------------------------------------- the preconditioner
 @njit(**NUMBA_OPTS)
 def restrict_pre(pre, idx):
-    """M restricted to idx: for PRE_FFT the box's inverse symbol and transform buffers
-    (in the preconditioner's precision); empty for the others."""
+    """M restricted to idx: for PRE_FFT the box's inverse symbol and transform buffers;
+    empty for the others."""
     if pre.kind == PRE_FFT:
-        w, h, P, sym, isym, at_box, at_out = _fft_box(idx, pre.n, pre.syms, pre.isyms, pre.cut2,
-                                                      pre.spacing, pre.diag0)
-        return (h, isym, at_box, at_out, np.zeros((w, w), dtype=isym.dtype),
-                np.zeros((w, P // 2 + 1), dtype=PRECOND_CDTYPE), np.empty((w, P), dtype=isym.dtype))
-    isym = np.zeros((1, 1), dtype=PRECOND_DTYPE)
-    none = np.zeros(0, dtype=np.int64)
-    return (0, isym, none, none, isym.copy(), np.zeros((1, 1), dtype=PRECOND_CDTYPE), isym.copy())
+        w, h, P, sym, isym, at = _fft_box(idx, pre.n, pre.syms, pre.isyms, pre.cut2, pre.spacing,
+                                          pre.diag0)
+        return (h, isym, at) + buffers(w, P)
+    return (0, np.zeros((1, 1)), np.zeros(0, dtype=np.int64)) + buffers(1, 1)
 
 
 @njit(**NUMBA_OPTS)
 def precondition(pre, pws, idx, r, z):
     """z = M r on the contact set idx."""
     if pre.kind == PRE_FFT:
-        h, isym, at_box, at_out, box, spec, out = pws
-        box_apply_set(isym, at_box, at_out, r, h, box, spec, out, z, pre.threaded)
+        h, isym, at, box, spec, col, out = pws
+        box_apply_set(isym, at, r, h, box, spec, col, out, z, pre.threads)
     elif pre.kind == PRE_DIAGONAL:
         for k in range(idx.size):
             z[k] = pre.inv_diag[idx[k]] * r[k]
