@@ -32,12 +32,13 @@ DECISION_SLACK = 10.0
 ROUND_TOLS = (1e-7,)
 
 
-# Box size P from which the compiled FFT spreads its fixed chunks over the Numba threads
+# Box size P from which the compiled FFT cuts its stages into one part per Numba thread
 # (when there are more than one: NUMBA_NUM_THREADS=1 keeps a run on one core, as campaign
 # workers do). One convolution, medians of 200 on the quiet 2-core VM (`python -m
-# bench.run_bench --only fft`): P = 192, 0.23 ms on 2 threads vs 0.31 ms on one; P = 480,
-# 1.26 vs 2.45 ms. Under heavy load a barrier can wait a scheduler slice, so a run also
-# times both ways at start (tfm.kernels.fft.threads_pay) and keeps the faster.
+# bench.run_bench --only fft`, 2026-11-24): P = 128, 0.071 ms either way; P = 192, 0.128 ms
+# on 2 threads vs 0.166 ms on one; P = 480, 0.69 vs 1.15 ms. Under heavy load a barrier can
+# wait a scheduler slice, so a run also times both ways at start (tfm.kernels.fft.
+# threads_pay) and keeps the faster.
 FFT_THREADED_SIZE = 192
 
 

@@ -1,0 +1,60 @@
+"""Before/after of two checkouts of tfm on the standard curve, runs interleaved.
+
+    python -m bench.ab_commits OLD_CHECKOUT NEW_CHECKOUT 1/128x5 1/256x5 1/512x3
+
+Each ``SPACINGxPAIRS`` runs the curve PAIRS times in each checkout, alternating, one
+process per run (PYTHONPATH = the checkout; NUMBA_NUM_THREADS passed through), and prints
+the medians of tfm.simulate's wall time, their ratio, the CG iterations, whether the contact
+count is equal at every step and how far the pull-offs lie apart. Make a second checkout
+with `git worktree add ../old <commit>`; its first run compiles its kernels (not timed:
+each child compiles on a 1/16 curve first).
+"""
+import json
+import os
+import statistics
+import subprocess
+import sys
+
+CHILD = r'''
+import json, sys
+from tfm import Params, simulate
+from bench.run_bench import STANDARD
+p = Params.from_dict(dict(STANDARD, spacing=sys.argv[1]))
+simulate(p.replace(spacing=1 / 16))
+r = simulate(p)
+s = r.summary
+print(json.dumps([s["wall_time"], s["solver_iters"], s["pull_off_force"], r.curve["n_contact"].tolist()]))
+'''
+
+
+def run(checkout: str, spacing: str) -> list:
+    env = {"PYTHONPATH": os.path.abspath(checkout), "PATH": os.environ.get("PATH", "/usr/bin:/bin")}
+    if "NUMBA_NUM_THREADS" in os.environ:
+        env["NUMBA_NUM_THREADS"] = os.environ["NUMBA_NUM_THREADS"]
+    # cwd too: `python -c` puts the working directory before PYTHONPATH
+    out = subprocess.run([sys.executable, "-c", CHILD, spacing], capture_output=True, text=True,
+                         env=env, cwd=os.path.abspath(checkout), check=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) < 3:
+        sys.exit(__doc__)
+    old, new, cases = argv[0], argv[1], argv[2:]
+    for case in cases:
+        spacing, pairs = case.split("x")
+        runs = {old: [], new: []}
+        for _ in range(int(pairs)):
+            for checkout in (old, new):
+                runs[checkout].append(run(checkout, spacing))
+        a, b = runs[old], runs[new]
+        ma, mb = (statistics.median(r[0] for r in x) for x in (a, b))
+        print(f"{spacing}: old {[round(r[0], 2) for r in a]} median {ma:.3f} s ({a[0][1]} CG iterations) | "
+              f"new {[round(r[0], 2) for r in b]} median {mb:.3f} s ({b[0][1]}) | old/new {ma / mb:.2f}x | "
+              f"n_contact equal at every step: {a[0][3] == b[0][3]} | pull-off relative difference "
+              f"{abs(a[0][2] - b[0][2]) / a[0][2]:.1e}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
