@@ -49,9 +49,8 @@ def blocked_dot(a, b):
 
 
 @njit(**NUMBA_OPTS)
-def index_box(n, idx):
-    """Bounding box of flat indices on an n x n grid: top-left (i0, j0), square width w,
-    row count h."""
+def index_bounds(n, idx):
+    """First and last row and column (i0, i1, j0, j1) of flat indices on an n x n grid."""
     i0 = n
     j0 = n
     i1 = -1
@@ -63,6 +62,14 @@ def index_box(n, idx):
         i1 = max(i1, i)
         j0 = min(j0, j)
         j1 = max(j1, j)
+    return i0, i1, j0, j1
+
+
+@njit(**NUMBA_OPTS)
+def index_box(n, idx):
+    """Bounding box of flat indices on an n x n grid: top-left (i0, j0), square width w,
+    row count h."""
+    i0, i1, j0, j1 = index_bounds(n, idx)
     return i0, j0, max(i1 - i0, j1 - j0) + 1, i1 - i0 + 1
 
 
@@ -70,9 +77,5 @@ def index_box(n, idx):
 def grid_reach(n, idx):
     """The largest offset, along either axis, from a spring of idx to any point of the
     n x n grid: the farthest grid edge from idx's bounding box."""
-    i0, j0, w, h = index_box(n, idx)
-    i1 = i0 + h - 1
-    j1 = j0
-    for k in range(idx.size):
-        j1 = max(j1, idx[k] % n)
+    i0, i1, j0, j1 = index_bounds(n, idx)
     return max(max(i1, n - 1 - i0), max(j1, n - 1 - j0))
