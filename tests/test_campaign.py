@@ -480,9 +480,10 @@ def test_a_killed_worker_fails_only_its_own_run(tmp_path):
     recorded as failed with the cause, the pool is rebuilt, every other run finishes."""
     psutil = pytest.importorskip("psutil")
     path = tmp_path / "pool.toml"
-    # 1/128: a run takes about a second, far longer than a worker needs to take its next
-    # run, so a worker killed a moment after a run finished is mid-run, not idle.
-    path.write_text('name = "pool"\n[base]\nspacing = "1/128"\nk_th = 0.02\nshape = "paraboloid"\n'
+    # 1/256: a run takes 2-4 s on a worker's one thread, far longer than a worker needs to
+    # take its next run, so a worker killed a moment after a run finished is mid-run, not
+    # idle (at 1/128, 0.4 s a run, the pool could finish before the kill).
+    path.write_text('name = "pool"\n[base]\nspacing = "1/256"\nk_th = 0.02\nshape = "paraboloid"\n'
                     'max_indent = 0.05\nstep = 2.5e-4\n[sweep]\nalpha = [0.5, 0.6, 0.7, 0.75]\n')
     store = CampaignStore(tmp_path / "pool")
     proc = subprocess.Popen([sys.executable, "-m", "tfm", "campaign", "run", str(path), "--jobs", "2",

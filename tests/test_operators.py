@@ -96,6 +96,41 @@ def test_preconditioners_are_symmetric_positive_definite(choice):
     assert np.linalg.eigvalsh(0.5 * (dense + dense.T)).min() > 0
 
 
+@pytest.mark.parametrize("kw", [KERNELS[0], KERNELS[3]], ids=["boussinesq", "neighbors-3"])
+def test_fft_preconditioner_is_the_wrapped_inverse_kernel(kw):
+    """The compiled FFT preconditioner against a NumPy double loop of its definition: C^-1
+    in real space from the whole grid's symbol, truncated to the offsets -P//2 ... P - P//2 - 1
+    of a P x P periodic box (P = the fast size >= w + 2 PRE_BOX_MARGIN, at most that of
+    2 w - 1) and wrapped onto it. Sets narrower than the grid (wrapped box smaller than
+    2 w - 1) and one that spans it."""
+    from scipy.fft import next_fast_len
+    from tfm.config import PRE_BOX_MARGIN
+    p = tiny(extent=15 / 8, **kw)                  # 31 x 31 springs
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    n = layout.shape[0]
+    sym, Pfull = grid_symbol(spec, layout)
+    kinv = np.fft.irfft2(1.0 / sym, s=(Pfull, Pfull))
+    M = make_preconditioner(p.replace(preconditioner="fft"), spec, layout)
+    rng = np.random.default_rng(4)
+    for i0, j0, w in [(3, 5, 9), (10, 2, 17), (0, 0, n)]:
+        ii, jj = np.meshgrid(np.arange(i0, i0 + w), np.arange(j0, j0 + w), indexing="ij")
+        box = (ii * n + jj).ravel()
+        idx = np.sort(rng.choice(box, box.size // 2, replace=False))
+        r = rng.normal(size=idx.size)
+        si, sj = idx // n, idx % n
+        wb = max(si.max() - si.min(), sj.max() - sj.min()) + 1
+        P = min(next_fast_len(wb + 2 * PRE_BOX_MARGIN, real=True), next_fast_len(2 * wb - 1, real=True))
+        half = P // 2
+        wrap = lambda a: (a + half) % P - half        # offset in -P//2 ... P - P//2 - 1
+        z = np.zeros(idx.size)
+        for k in range(idx.size):
+            for l in range(idx.size):
+                z[k] += kinv[wrap(si[k] - si[l]) % Pfull, wrap(sj[k] - sj[l]) % Pfull] * r[l]
+        # round-off of two FFTs of P x P against a double loop over |S| terms
+        assert np.allclose(M(idx, r), z, rtol=0, atol=1e-12 * np.abs(z).max())
+
+
 @pytest.mark.parametrize("rings", [2, 3])
 def test_neighbors_foundation_compliance_matches_the_operator(rings):
     """A uniform pressure sigma on a truncated kernel gives u = spacing * S(m) * sigma away

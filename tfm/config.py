@@ -42,6 +42,18 @@ ROUND_TOLS = (1e-7,)
 FFT_THREADED_SIZE = 192
 
 
+# The FFT preconditioner M = R C^-1 R^T applies the inverse kernel (real space, taken once
+# from the whole grid's symbol) wrapped onto a periodic box of P >= w + 2 PRE_BOX_MARGIN,
+# not on the image-free box P >= 2 w - 1 of C itself: C^-1 decays like 1/r^3, so the images
+# of a box barely wider than the contact cost CG almost nothing, and the box holds about a
+# quarter of the cells (tfm.kernels.ops.restrict_pre). A preconditioner needs no exactness,
+# only symmetry and positivity (its symbol is floored above zero). CG iterations of the
+# standard curve at 1/256 (2026-11-24): exact box 2 w - 1 7130; margin 0 7080, 2 6971,
+# 8 7029, 16 7058. (Inverting the symbol of C periodized on a small box instead is worse:
+# C's 1/r tail has large images; README, Performance.)
+PRE_BOX_MARGIN = 2
+
+
 # Box sizes of the whole-grid field u = C F, as fractions of the whole grid's box
 # (P = fast_len(2 n - 1)): the field of a contact takes the smallest rung with no images
 # (tfm.kernels.ops.field_on_grid). A ladder, not the exact size, so that a run caches at

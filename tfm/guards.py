@@ -93,9 +93,11 @@ def _next_fast_len(n: int) -> int:
 # bytes per spring and per padded FFT cell, and the runtime's own baseline; fitted to
 # the peak resident memory measured at 513^2 and 1025^2 springs per operator (direct
 # 164-185, tree 222 bytes a spring; the square grid's FFT symbol 16 bytes a cell), checked
-# at 2049^2 (docs/physics.md, section 8)
+# at 2049^2 (docs/physics.md, section 8). Since the FFT preconditioner keeps the inverse
+# kernel in real space on the same box (8 bytes a cell, tfm.operators.FFTPreconditioner;
+# its construction passes through the inverse symbol and a complex transform), 24.
 BYTES_PER_SPRING = {"fft": 200.0, "direct": 200.0, "tree": 240.0}
-BYTES_PER_FFT_CELL = 16.0
+BYTES_PER_FFT_CELL = 24.0
 # the whole-grid field's smaller boxes (config.FIELD_BOX_FRACTIONS): one real symbol each,
 # P x (P/2 + 1) doubles, 4 bytes a cell
 BYTES_PER_FIELD_CELL = 4.0
@@ -108,7 +110,7 @@ def estimate_memory(p) -> float:
     O(N) arrays per spring (positions, areas, heights, thresholds, forces, masks, the
     solver's work vectors; the tree's keys and nodes), plus for the FFT operator the
     full-grid symbol on the padded P x P box (P = fast size >= 2n - 1: the kernel, its
-    real transform and the inverse symbol) and the symbols of the field's smaller boxes,
+    real transform and the preconditioner's inverse kernel) and the symbols of the field's smaller boxes,
     plus the Python/NumPy/SciPy/Numba runtime.
     """
     n = n_springs(p)

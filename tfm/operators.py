@@ -24,7 +24,7 @@ from .geometry import Layout
 from .kernels import fft as fftk
 from .kernels.compliance import BOUSSINESQ, LOCAL, NEIGHBORS, cutoff_squared
 from .kernels.ops import (PRE_DIAGONAL, PRE_FFT, PRE_NONE, PRE_STENCIL, DirectData, FFTData, PreData,
-                          box_symbols, new_symbol_cache, start_threads)
+                          cached_symbol, new_symbol_cache, precondition, restrict_pre, start_threads)
 from .kernels.direct import direct_sum
 from .kernels.grid import index_box, stencil_apply
 from .params import ParameterError, Params
@@ -75,8 +75,8 @@ class FFTOperator:
 
     The convolution runs on the bounding box (width w) of the sources and targets only,
     padded to a fast size P >= 2w - 1: inside the contact solve both are the contact set,
-    far smaller than the grid. Symbols and inverse symbols (the preconditioner's) are
-    cached per P in typed dicts that the compiled contact solve shares."""
+    far smaller than the grid. Symbols are cached per P in a typed dict that the compiled
+    contact solve shares."""
 
     name = "fft"
 
@@ -90,18 +90,19 @@ class FFTOperator:
         self.all = np.arange(layout.n)
         self._threads_pay = None
         if symbol is None:
-            self.syms, self.isyms = new_symbol_cache(0, np.ones((1, 1)))
+            self.syms = new_symbol_cache(0, np.ones((1, 1)))
         else:
-            self.syms, self.isyms = new_symbol_cache(symbol[1], np.ascontiguousarray(symbol[0], dtype=float))
+            self.syms = new_symbol_cache(symbol[1], np.ascontiguousarray(symbol[0], dtype=float))
 
-    def symbols(self, P: int) -> tuple[np.ndarray, np.ndarray]:
-        return box_symbols(self.syms, self.isyms, P, self.cut2, self.spacing, float(self.diag[0]))
+    def symbol(self, P: int) -> np.ndarray:
+        """The kernel's symbol on a P x P periodic box (cached)."""
+        return cached_symbol(self.syms, P, self.cut2, self.spacing, float(self.diag[0]))
 
     def threaded(self) -> bool:
         """Whether transforms of this grid's size run faster over the Numba threads, timed
         once (tfm.kernels.fft.threads_pay); the bits are the same either way."""
         if self._threads_pay is None:
-            sym = self.symbols(fftk.fast_len(2 * self.n - 1))[0]
+            sym = self.symbol(fftk.fast_len(2 * self.n - 1))
             self._threads_pay = fftk.threads_pay(self.n, sym, numba.get_num_threads())
         return self._threads_pay
 
@@ -114,17 +115,10 @@ class FFTOperator:
         start_threads()
         n = self.n
         P = fftk.fast_len(2 * n - 1)
-        return FFTData(n, self.spacing, self.cut2, self.diag, self.syms, self.isyms, self.symbols(P)[0],
+        return FFTData(n, self.spacing, self.cut2, self.diag, self.syms, self.symbol(P),
                        *fftk.buffers(n, P), self.threads())
 
-    def apply_inverse(self, src, f_src, tgt=None):
-        """C^-1 on the box of src and tgt (the FFT preconditioner): same transforms."""
-        return self._convolve(src, f_src, tgt, 1)
-
     def apply(self, src, f_src, tgt=None):
-        return self._convolve(src, f_src, tgt, 0)
-
-    def _convolve(self, src, f_src, tgt, which):
         n = self.n
         src = np.ascontiguousarray(src, dtype=np.int64)
         if tgt is None:
@@ -133,7 +127,7 @@ class FFTOperator:
             tgt = np.ascontiguousarray(tgt, dtype=np.int64)
             i0, j0, w, _ = index_box(n, np.concatenate((src, tgt)))
         w = max(w, 1)
-        sym = self.symbols(fftk.fast_len(2 * w - 1))[which]
+        sym = self.symbol(fftk.fast_len(2 * w - 1))
         return fftk.box_apply(sym, src, np.ascontiguousarray(f_src, dtype=float), tgt, n, i0, j0, w,
                               self.threads())
 
@@ -234,20 +228,33 @@ class StencilPreconditioner:
 
 
 class FFTPreconditioner:
-    """R C^-1 R^T with the inverse symbol on the contact's box (two FFTs per application)."""
+    """R C^-1 R^T: the inverse kernel, taken once in real space from the whole grid's
+    symbol, wrapped onto a periodic box a few spacings wider than the contact (two FFTs
+    per application; tfm.kernels.ops.restrict_pre)."""
 
     name = "fft"
 
     def __init__(self, op: FFTOperator):
-        self.op = op            # shares the operator's symbol cache
+        self.op = op
+        sym = op.symbol(fftk.fast_len(2 * op.n - 1))
+        self.kinv = fftk.inverse_kernel(sym)
+        # any positive floor keeps M positive definite; half the smallest exact value is
+        # far below what the wrapped symbols reach (they have not needed it)
+        self.floor = 0.5 / float(sym.max())
+        self.psyms = new_symbol_cache(0, np.ones((1, 1)))
+        self._data = None
 
     def __call__(self, idx, r):
-        return self.op.apply_inverse(idx, r, idx)
+        idx = np.ascontiguousarray(idx, dtype=np.int64)
+        z = np.empty(idx.size)
+        pre = self.compiled() if self._data is None else self._data
+        precondition(pre, restrict_pre(pre, idx), idx, np.ascontiguousarray(r, dtype=float), z)
+        return z
 
     def compiled(self) -> PreData:
-        op = self.op
-        return pre_data(PRE_FFT, n=op.n, spacing=op.spacing, cut2=op.cut2, diag0=float(op.diag[0]),
-                        syms=op.syms, isyms=op.isyms, threads=op.threads())
+        self._data = pre_data(PRE_FFT, n=self.op.n, kinv=self.kinv, floor=self.floor, psyms=self.psyms,
+                              threads=self.op.threads())
+        return self._data
 
 
 class DiagonalPreconditioner:
@@ -263,14 +270,15 @@ class DiagonalPreconditioner:
         return pre_data(PRE_DIAGONAL, inv_diag=self.inv)
 
 
-def pre_data(kind=PRE_NONE, inv_diag=None, stencil=None, n=0, spacing=0.0, cut2=0.0, diag0=0.0,
-             syms=None, isyms=None, threads=1) -> PreData:
+def pre_data(kind=PRE_NONE, inv_diag=None, stencil=None, n=0, kinv=None, floor=0.0, psyms=None,
+             threads=1) -> PreData:
     """PreData with empty stand-ins for what the kind does not use (Numba needs one type)."""
-    if syms is None:
-        syms, isyms = new_symbol_cache(0, np.ones((1, 1)))
+    if psyms is None:
+        psyms = new_symbol_cache(0, np.ones((1, 1)))
     return PreData(kind, np.ascontiguousarray(np.ones(1) if inv_diag is None else inv_diag, dtype=float),
                    np.ascontiguousarray(np.zeros((1, 1)) if stencil is None else stencil, dtype=float),
-                   int(n), float(spacing), float(cut2), float(diag0), syms, isyms, int(threads))
+                   int(n), np.ascontiguousarray(np.zeros((1, 1)) if kinv is None else kinv, dtype=float),
+                   float(floor), psyms, int(threads))
 
 
 def make_preconditioner(p: Params, spec: KernelSpec, layout: Layout, symbol=None, operator=None):

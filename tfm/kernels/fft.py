@@ -69,6 +69,33 @@ def symbol(cut2, spacing, diag0, P):
 
 
 @njit(**NUMBA_OPTS)
+def inverse_kernel(sym):
+    """The inverse of the kernel with symbol ``sym`` (P x P periodic box), in real space:
+    C^-1 as a kernel on the same box (offset 0 at [0, 0])."""
+    P = sym.shape[0]
+    return np.ascontiguousarray(sfft.irfft2(1.0 / sym, s=(P, P)))
+
+
+@njit(**NUMBA_OPTS)
+def wrapped_symbol(kernel, P, floor):
+    """Symbol of ``kernel`` (real space on a larger periodic box, offset 0 at [0, 0])
+    truncated to the offsets -P//2 ... P - P//2 - 1 of a P x P periodic box and wrapped
+    onto it, floored at ``floor`` > 0 so that the circulant stays positive definite. The
+    offsets form a symmetric set modulo P, so an even kernel stays even."""
+    Q = kernel.shape[0]
+    half = P // 2
+    K = np.empty((P, P))
+    for a in range(-half, P - half):
+        for b in range(-half, P - half):
+            K[a % P, b % P] = kernel[a % Q, b % Q]
+    s = np.ascontiguousarray(sfft.rfft2(K).real)
+    for i in range(s.shape[0]):
+        for j in range(s.shape[1]):
+            s[i, j] = max(s[i, j], floor)
+    return s
+
+
+@njit(**NUMBA_OPTS)
 def _cut(n, k, parts):
     """Start of part k of range(n) cut into ``parts`` (k = parts gives n), at a multiple of
     ALIGN, as even as that allows."""

@@ -25,9 +25,9 @@ from numba import njit, types
 from numba.extending import overload
 from numba.typed import Dict
 
-from ..config import FIELD_BOX_FRACTIONS, NUMBA_OPTS
+from ..config import FIELD_BOX_FRACTIONS, NUMBA_OPTS, PRE_BOX_MARGIN
 from .direct import _pair_sums
-from .fft import buffers, convolve, fast_len, symbol
+from .fft import buffers, convolve, fast_len, symbol, wrapped_symbol
 from .grid import grid_reach, index_box, stencil_apply
 from .tree import (MORTON_BITS, build_nodes, csr_apply, evaluate, node_boxes, node_geometry,
                    node_moments, subset_order)
@@ -43,7 +43,6 @@ class FFTData(NamedTuple):
     cut2: float
     diag: np.ndarray        # C_ii per spring
     syms: object            # typed dict P -> symbol (shared with the operator)
-    isyms: object           # typed dict P -> inverse symbol
     sym_full: np.ndarray    # symbol of the whole grid's box, P = fast_len(2 n - 1)
     src: np.ndarray         # work buffers of the whole-grid field (fft.buffers(n, P))
     spec: np.ndarray
@@ -91,16 +90,14 @@ class SparseData(NamedTuple):
 
 
 class PreData(NamedTuple):
-    """The preconditioner: kind (PRE_*), its data, and for PRE_FFT the grid's symbols."""
+    """The preconditioner: kind (PRE_*) and its data."""
     kind: int
     inv_diag: np.ndarray    # 1 / C_ii (PRE_DIAGONAL)
     stencil: np.ndarray     # truncated inverse kernel (PRE_STENCIL)
     n: int                  # grid side (PRE_FFT, PRE_STENCIL)
-    spacing: float
-    cut2: float
-    diag0: float
-    syms: object
-    isyms: object
+    kinv: np.ndarray        # C^-1 in real space on the whole grid's box (PRE_FFT)
+    floor: float            # lower bound of its box symbols: half the smallest exact value
+    psyms: object           # typed dict P -> symbol of kinv wrapped onto the P box (PRE_FFT)
     threads: int
 
 
@@ -117,26 +114,37 @@ SYMBOL_ARRAY = types.float64[:, ::1]
 
 @njit(**NUMBA_OPTS)
 def new_symbol_cache(P, sym):
-    """Empty typed dicts P -> symbol and P -> inverse symbol (with ``sym`` at P if P > 0).
+    """An empty typed dict P -> symbol (with ``sym`` at P if P > 0).
 
     Made in compiled code: filling a typed dict from Python compiles its methods anew in
     every process (about 1.7 s of a 1/128 run's start-up)."""
     syms = Dict.empty(key_type=types.int64, value_type=SYMBOL_ARRAY)
-    isyms = Dict.empty(key_type=types.int64, value_type=SYMBOL_ARRAY)
     if P > 0:
         syms[P] = sym
-        isyms[P] = 1.0 / sym
-    return syms, isyms
+    return syms
 
 
 @njit(**NUMBA_OPTS)
-def box_symbols(syms, isyms, P, cut2, spacing, diag0):
-    """The symbol and its inverse for box size P, cached in the typed dicts."""
+def cached_symbol(syms, P, cut2, spacing, diag0):
+    """The kernel's symbol for box size P, cached in the typed dict."""
     if P not in syms:
         syms[P] = symbol(cut2, spacing, diag0, P)
-    if P not in isyms:
-        isyms[P] = 1.0 / syms[P]
-    return syms[P], isyms[P]
+    return syms[P]
+
+
+@njit(**NUMBA_OPTS)
+def pre_len(w):
+    """Box size of the FFT preconditioner for a w-wide contact (config.PRE_BOX_MARGIN),
+    never more than the image-free size of C's own box."""
+    return min(fast_len(w + 2 * PRE_BOX_MARGIN), fast_len(2 * w - 1))
+
+
+@njit(**NUMBA_OPTS)
+def pre_symbol(psyms, kinv, floor, P):
+    """The preconditioner's symbol for box size P, cached in the typed dict."""
+    if P not in psyms:
+        psyms[P] = wrapped_symbol(kinv, P, floor)
+    return psyms[P]
 
 
 @njit(**NUMBA_OPTS)
@@ -154,18 +162,14 @@ def box_apply_set(sym, at, vals, h, box, spec, col, out, res, threads):
 
 
 @njit(**NUMBA_OPTS)
-def _fft_box(idx, n, syms, isyms, cut2, spacing, diag0):
-    """The bounding box of idx on the n x n grid (width w, h rows), its FFT size P, symbol
-    and inverse symbol, and where each spring of idx sits in the w x P box (``at``). Made
+def box_places(idx, n, i0, j0, P):
+    """Where each spring of idx sits in a box with corner (i0, j0) and rows P long. Made
     once per solve: an integer division per spring and application cost a quarter of a CG
     iteration at 1/256."""
-    i0, j0, w, h = index_box(n, idx)
-    P = fast_len(2 * w - 1)
-    sym, isym = box_symbols(syms, isyms, P, cut2, spacing, diag0)
     at = np.empty(idx.size, dtype=np.int64)
     for k in range(idx.size):
         at[k] = (idx[k] // n - i0) * P + idx[k] % n - j0
-    return w, h, P, sym, isym, at
+    return at
 
 
 # ---------------------------------------------------------------- the operator
@@ -186,8 +190,10 @@ def field(op, ws, idx, vals, u):
 
 # The FFT operator on the square grid: the contact's bounding box, zero-padded to P.
 def _fft_restrict(op, idx):
-    w, h, P, sym, isym, at = _fft_box(idx, op.n, op.syms, op.isyms, op.cut2, op.spacing, op.diag[0])
-    return (h, sym, at) + buffers(w, P)
+    i0, j0, w, h = index_box(op.n, idx)
+    P = fast_len(2 * w - 1)
+    sym = cached_symbol(op.syms, P, op.cut2, op.spacing, op.diag[0])
+    return (h, sym, box_places(idx, op.n, i0, j0, P)) + buffers(w, P)
 
 
 def _fft_apply(op, ws, idx, vals, res):
@@ -324,8 +330,7 @@ def field_on_grid(idx, vals, n, syms, cut2, spacing, diag0, src, spec, col, out,
     if idx.size == 0:
         return
     P = field_box(n, 2 * grid_reach(n, idx) + 1)
-    if P not in syms:
-        syms[P] = symbol(cut2, spacing, diag0, P)     # the inverse is not needed here
+    sym = cached_symbol(syms, P, cut2, spacing, diag0)
     src_p = src.reshape(-1)[:n * P].reshape((n, P))
     spec_p = spec.reshape(-1)[:n * (P // 2 + 1)].reshape((n, P // 2 + 1))
     col_p = col.reshape(-1)[:P * (P // 2 + 1)].reshape((P, P // 2 + 1))
@@ -335,7 +340,7 @@ def field_on_grid(idx, vals, n, syms, cut2, spacing, diag0, src, spec, col, out,
     src_p[r0:r1] = 0.0
     for k in range(idx.size):
         src_p[idx[k] // n, idx[k] % n] = vals[k]
-    convolve(src_p, r0, r1, spec_p, col_p, out_p, syms[P], threads)
+    convolve(src_p, r0, r1, spec_p, col_p, out_p, sym, threads)
     for i in range(n):
         for j in range(n):
             u[i * n + j] = out_p[i, j]
@@ -344,12 +349,18 @@ def field_on_grid(idx, vals, n, syms, cut2, spacing, diag0, src, spec, col, out,
 # ---------------------------------------------------------------- the preconditioner
 @njit(**NUMBA_OPTS)
 def restrict_pre(pre, idx):
-    """M restricted to idx: for PRE_FFT the box's inverse symbol and transform buffers;
-    empty for the others."""
+    """M restricted to idx: for PRE_FFT the box's symbol, places and transform buffers;
+    empty for the others.
+
+    PRE_FFT is R C^-1 R^T with C^-1 wrapped onto a periodic box only PRE_BOX_MARGIN wider
+    than the contact on each side (pre_len), not the 2 w - 1 that C needs: the inverse
+    kernel decays like 1/r^3, so its images cost CG almost nothing, and the box has about a
+    quarter of the cells."""
     if pre.kind == PRE_FFT:
-        w, h, P, sym, isym, at = _fft_box(idx, pre.n, pre.syms, pre.isyms, pre.cut2, pre.spacing,
-                                          pre.diag0)
-        return (h, isym, at) + buffers(w, P)
+        i0, j0, w, h = index_box(pre.n, idx)
+        P = pre_len(w)
+        psym = pre_symbol(pre.psyms, pre.kinv, pre.floor, P)
+        return (h, psym, box_places(idx, pre.n, i0, j0, P)) + buffers(w, P)
     return (0, np.zeros((1, 1)), np.zeros(0, dtype=np.int64)) + buffers(1, 1)
 
 
@@ -357,8 +368,8 @@ def restrict_pre(pre, idx):
 def precondition(pre, pws, idx, r, z):
     """z = M r on the contact set idx."""
     if pre.kind == PRE_FFT:
-        h, isym, at, box, spec, col, out = pws
-        box_apply_set(isym, at, r, h, box, spec, col, out, z, pre.threads)
+        h, psym, at, box, spec, col, out = pws
+        box_apply_set(psym, at, r, h, box, spec, col, out, z, pre.threads)
     elif pre.kind == PRE_DIAGONAL:
         for k in range(idx.size):
             z[k] = pre.inv_diag[idx[k]] * r[k]
