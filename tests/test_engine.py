@@ -91,6 +91,7 @@ def test_compiled_engine_is_bitwise_independent_of_thread_count(skip):
         for nt in (1, 2):
             numba.set_num_threads(nt)
             state, out = ContactState(prob), CurveResult()
+            state.thread_choice = None   # no switching between modes: one path throughout
             state.threaded = nt > 1      # the threaded path even where it would not pay
             recs = [state.advance(-0.001 * (k + 1), k, "load", out) for k in range(4)]
             runs.append((state.F.copy(), state.u.copy(), [r.force for r in recs]))
@@ -121,6 +122,48 @@ def test_threads_are_used_only_where_they_can_pay():
     assert threads_pay(40, small, 2) is False
     assert threads_pay(100, large, 1) is False
     assert isinstance(threads_pay(100, large, 2), bool)
+
+
+def test_thread_choice_holds_the_mode_that_was_faster_per_unit_of_work():
+    """ThreadChoice alternates the modes for TRIAL steps each, then holds the one with the
+    smaller wall time per unit of work for HOLD steps, and tries again (synthetic times)."""
+    from tfm.solver import ThreadChoice
+
+    def cycle(choice, cost):                  # cost[mode]: seconds per unit of work
+        modes = []
+        for k in range(2 * choice.TRIAL + choice.HOLD):
+            mode = choice.next()
+            work = 5 + k % 3                 # steps of unequal work
+            choice.record(mode, cost[mode] * work, work)
+            modes.append(mode)
+        return modes
+
+    choice = ThreadChoice()
+    trial = 2 * ThreadChoice.TRIAL
+    modes = cycle(choice, {True: 1.0, False: 2.0})
+    assert modes[:trial] == [True, False] * ThreadChoice.TRIAL
+    assert all(modes[trial:])                          # threaded was faster: held
+    modes = cycle(choice, {True: 3.0, False: 2.0})     # the second core got busy
+    assert modes[:trial] == [True, False] * ThreadChoice.TRIAL
+    assert not any(modes[trial:])
+
+
+def test_a_run_switching_modes_gives_the_bits_of_a_serial_run():
+    """The thread choice switches modes from step to step; the curve is that of one thread."""
+    if numba.get_num_threads() < 2:
+        pytest.skip("needs 2 Numba threads")
+    p = Params.from_dict(dict(STANDARD, spacing="1/128", extent=2.0, max_indent=0.01, step=1e-3))
+    prob, layout = build_problem(p)
+    runs = []
+    for switching in (False, True):
+        state, out = ContactState(prob), CurveResult()
+        assert state.thread_choice is not None            # 301 x 301: P >= THREADED_SIZE
+        if not switching:
+            state.thread_choice = None
+            state.threaded = False
+        recs = [state.advance(-0.001 * (k + 1), k, "load", out) for k in range(6)]
+        runs.append((state.F.copy(), [r.force for r in recs]))
+    assert np.array_equal(runs[0][0], runs[1][0]) and runs[0][1] == runs[1][1]
 
 
 def test_loose_decision_rounds_rest_on_rigorous_bounds():

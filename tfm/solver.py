@@ -9,6 +9,7 @@ The solver knows nothing about files; it returns arrays and flags.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numba
@@ -18,6 +19,7 @@ from .config import DECISION_SLACK, ROUND_TOLS
 from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, S_ENTERED, S_EXCEEDED,
                               S_FAILURES, S_ITERS, S_REFINES, S_ROUNDS, S_SNAPPED, S_SOLVES, snap_rounds,
                               solve_on_set)
+from .kernels.fft import THREADED_SIZE
 from .kernels.grid import blocked_dot
 from .kernels.ops import PRE_FFT, FFTData
 from .operators import pre_data
@@ -77,6 +79,47 @@ def entry_point(dispatcher, args):
     return dispatcher.compile(tuple(numba.typeof(a) for a in args))
 
 
+class ThreadChoice:
+    """Serial or threaded transforms, chosen from the run's own steps, again and again.
+
+    The bits do not depend on the choice, only the time. A timing of a few convolutions at
+    start (tfm.kernels.fft.threads_pay) proved a poor guide on the 2-core VM: whole 1/256
+    curves took 2.1 s threaded in some processes and 3.5-4.1 s in others, 2.2-2.3 s serial
+    in all (2026-11-24, the second core's availability changes over seconds). So every
+    cycle runs TRIAL steps in each mode, alternating, compares the wall time per unit of
+    work (CG iterations + rounds + 1) and holds the faster mode for HOLD steps. Standard
+    curve, one process per run, interleaved (2026-11-24): 1/512 16.1-16.8 s against
+    19.3-20.8 s serial and 16.2-25.7 s with the start-up timing's choice; at 1/256 the
+    trials cost a little (medians 2.47 s against 2.30 s with the start-up timing, which
+    chose well in those runs, and 2.37 s serial)."""
+
+    TRIAL = 4
+    HOLD = 48
+
+    def __init__(self):
+        self.k = 0
+        self.spent = {False: [0.0, 0], True: [0.0, 0]}
+        self.mode = True
+
+    def next(self) -> bool:
+        """The mode of the next step."""
+        pos = self.k % (2 * self.TRIAL + self.HOLD)
+        if pos < 2 * self.TRIAL:
+            return pos % 2 == 0
+        if pos == 2 * self.TRIAL:
+            (ts, ws), (tt, wt) = self.spent[False], self.spent[True]
+            self.mode = tt * ws < ts * wt          # threaded if faster per unit of work
+            self.spent = {False: [0.0, 0], True: [0.0, 0]}
+        return self.mode
+
+    def record(self, threaded: bool, seconds: float, work: int) -> None:
+        """The step just taken: its mode, wall time and work."""
+        if self.k % (2 * self.TRIAL + self.HOLD) < 2 * self.TRIAL:
+            self.spent[threaded][0] += seconds
+            self.spent[threaded][1] += work
+        self.k += 1
+
+
 class ContactState:
     """Contact set, forces and displacements, advanced one dilatation step at a time.
 
@@ -119,6 +162,10 @@ class ContactState:
         self._x0 = np.ascontiguousarray(prob.x0, dtype=float)
         self._f_th = np.ascontiguousarray(prob.f_th, dtype=float)
         self._snap_rounds = self._solve_on_set = None    # compiled entry points (entry_point)
+        # threads only where convolve could use them: the whole grid's box from THREADED_SIZE
+        can_thread = (isinstance(self._op, FFTData) and numba.get_num_threads() > 1
+                      and self._op.sym_full.shape[0] >= THREADED_SIZE)
+        self.thread_choice = ThreadChoice() if can_thread else None
 
     # What a later step reads besides the problem: saved and restored by tfm.checkpoint.
     CARRIED = ("contact", "F", "u", "_slope", "_uslope", "_last_d", "_set_id", "_base", "_unit",
@@ -237,7 +284,13 @@ class ContactState:
         start_F, start_u = self.F.copy(), self.u.copy()
         # Skip the solve while the set is unchanged: F = F_base + (d - d_base) x.
         solved = self.skip_solves and self._predict(d)
+        choice = self.thread_choice
+        if choice is not None:
+            self.threaded = choice.next()
+            t0 = time.perf_counter()
         rounds, iters, snapped, entered = self._rounds(d, guess, u_guess, out, solved)
+        if choice is not None:
+            choice.record(self.threaded, time.perf_counter() - t0, iters + rounds + 1)
         if snapped or entered:
             self._set_id += 1
         elif self.skip_solves and (self._unit is None or self._unit_set != self._set_id):
