@@ -238,8 +238,9 @@ class FFTPreconditioner:
         self.op = op
         sym = op.symbol(fftk.fast_len(2 * op.n - 1))
         self.kinv = fftk.inverse_kernel(sym)
-        # any positive floor keeps M positive definite; half the smallest exact value is
-        # far below what the wrapped symbols reach (they have not needed it)
+        # any positive floor keeps M positive definite: half the smallest exact value. The
+        # 1/r kernel's wrapped symbols stay 3x above it; the truncated kernel's reach it at
+        # some box widths, with no more CG iterations (README, How it is computed)
         self.floor = 0.5 / float(sym.max())
         self.psyms = new_symbol_cache(0, np.ones((1, 1)))
         self._data = None
