@@ -95,9 +95,10 @@ def _next_fast_len(n: int) -> int:
 # 164-185, tree 222 bytes a spring; the square grid's FFT symbol 16 bytes a cell), checked
 # at 2049^2 (docs/physics.md, section 8). Since the FFT preconditioner keeps the inverse
 # kernel in real space on the same box (8 bytes a cell, tfm.operators.FFTPreconditioner;
-# its construction passes through the inverse symbol and a complex transform), 24.
+# its construction passes through the inverse symbol and complex transforms), the peak
+# grew by 23 bytes a cell at 2049^2 (1059 -> 1485 MiB): 32.
 BYTES_PER_SPRING = {"fft": 200.0, "direct": 200.0, "tree": 240.0}
-BYTES_PER_FFT_CELL = 24.0
+BYTES_PER_FFT_CELL = 32.0
 # the whole-grid field's smaller boxes (config.FIELD_BOX_FRACTIONS): one real symbol each,
 # P x (P/2 + 1) doubles, 4 bytes a cell
 BYTES_PER_FIELD_CELL = 4.0
