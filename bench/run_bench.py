@@ -83,14 +83,14 @@ def fft_table(widths=(64, 96, 128, 160, 240, 320, 480), repeats=200):
     for w in widths:
         P = fast_len(2 * w - 1)
         sym = symbol(1e300, 1.0 / 512, 3.8, P)
-        src, spec, col, out = buffers(w, P)
+        src, col, out = buffers(w, P)
         src[:, :w] = np.random.default_rng(0).random((w, w))
         ways = (1, numba.get_num_threads())
         times = {way: [] for way in ways}
         for k in range(repeats + 1):             # call 0 warms up (compilation, plans)
             for way in ways:
                 t = time.perf_counter()
-                convolve(src, 0, w, spec, col, out, sym, way)
+                convolve(src, 0, w, col, out, sym, way)
                 if k:
                     times[way].append(time.perf_counter() - t)
         rows.append((w, P, *[1e3 * statistics.median(times[way]) for way in ways]))

@@ -174,7 +174,7 @@ def test_whole_grid_field_uses_the_smallest_image_free_box():
         f = rng.normal(size=idx.size)
         u = np.full(n * n, np.nan)
         field_on_grid(idx, f, n, data.syms, data.cut2, data.spacing, data.diag[0], data.src,
-                      data.spec, data.col, data.out, u, 1)
+                      data.col, data.out, u, 1)
         ref = C[:, idx] @ f
         assert np.allclose(u, ref, rtol=0, atol=RTOL * np.abs(ref).max()), name
 
@@ -188,11 +188,11 @@ def test_convolution_in_parts_has_the_bits_of_whole_calls(w):
     rng = np.random.default_rng(w)
     P = fast_len(2 * w - 1)
     sym = rng.random((P, P // 2 + 1)) + 1.0
-    src, spec, col, out = buffers(w, P)
+    src, col, out = buffers(w, P)
     src[:, :w] = rng.random((w, w))
     results = []
     for parts in (1, 2, 3, 5):
-        convolve(src, 0, w, spec, col, out, sym, parts)
+        convolve(src, 0, w, col, out, sym, parts)
         results.append(out.copy())
     assert all(np.array_equal(results[0], r) for r in results[1:])
     ref = np.fft.irfft2(np.fft.rfft2(src, s=(P, P)) * sym, s=(P, P))[:w, :w]

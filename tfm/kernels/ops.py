@@ -45,7 +45,6 @@ class FFTData(NamedTuple):
     syms: object            # typed dict P -> symbol (shared with the operator)
     sym_full: np.ndarray    # symbol of the whole grid's box, P = fast_len(2 n - 1)
     src: np.ndarray         # work buffers of the whole-grid field (fft.buffers(n, P))
-    spec: np.ndarray
     col: np.ndarray
     out: np.ndarray
     threads: int            # Numba threads for large transforms (1: one)
@@ -148,14 +147,14 @@ def pre_symbol(psyms, kinv, floor, P):
 
 
 @njit(**NUMBA_OPTS)
-def box_apply_set(sym, at, vals, h, box, spec, col, out, res, threads):
+def box_apply_set(sym, at, vals, h, box, col, out, res, threads):
     """res = K vals for springs at the flat positions ``at`` of the W x P box (the first h
     rows hold them; the transform's output has the same layout), K given by its symbol.
     Only these positions of ``box`` are ever written in a solve, so the rest stays zero."""
     flat = box.reshape(-1)
     for k in range(at.size):
         flat[at[k]] = vals[k]
-    convolve(box, 0, h, spec, col, out, sym, threads)
+    convolve(box, 0, h, col, out, sym, threads)
     flat_out = out.reshape(-1)
     for k in range(at.size):
         res[k] = flat_out[at[k]]
@@ -197,13 +196,13 @@ def _fft_restrict(op, idx):
 
 
 def _fft_apply(op, ws, idx, vals, res):
-    h, sym, at, box, spec, col, out = ws
-    box_apply_set(sym, at, vals, h, box, spec, col, out, res, op.threads)
+    h, sym, at, box, col, out = ws
+    box_apply_set(sym, at, vals, h, box, col, out, res, op.threads)
 
 
 def _fft_field(op, ws, idx, vals, u):
-    field_on_grid(idx, vals, op.n, op.syms, op.cut2, op.spacing, op.diag[0], op.src, op.spec,
-                  op.col, op.out, u, op.threads)
+    field_on_grid(idx, vals, op.n, op.syms, op.cut2, op.spacing, op.diag[0], op.src, op.col,
+                  op.out, u, op.threads)
 
 
 # The direct sums (tfm.operators.DirectOperator.apply: the same kernels, the same order).
@@ -318,7 +317,7 @@ def field_box(n, need):
 
 
 @njit(**NUMBA_OPTS)
-def field_on_grid(idx, vals, n, syms, cut2, spacing, diag0, src, spec, col, out, u, threads):
+def field_on_grid(idx, vals, n, syms, cut2, spacing, diag0, src, col, out, u, threads):
     """u = C F on the whole n x n grid for forces vals on the springs idx (F = 0 elsewhere).
 
     Every target-source offset is at most H = grid_reach(n, idx), so a periodic box of
@@ -332,7 +331,6 @@ def field_on_grid(idx, vals, n, syms, cut2, spacing, diag0, src, spec, col, out,
     P = field_box(n, 2 * grid_reach(n, idx) + 1)
     sym = cached_symbol(syms, P, cut2, spacing, diag0)
     src_p = src.reshape(-1)[:n * P].reshape((n, P))
-    spec_p = spec.reshape(-1)[:n * (P // 2 + 1)].reshape((n, P // 2 + 1))
     col_p = col.reshape(-1)[:P * (P // 2 + 1)].reshape((P, P // 2 + 1))
     out_p = out.reshape(-1)[:n * P].reshape((n, P))
     r0 = idx[0] // n
@@ -340,7 +338,7 @@ def field_on_grid(idx, vals, n, syms, cut2, spacing, diag0, src, spec, col, out,
     src_p[r0:r1] = 0.0
     for k in range(idx.size):
         src_p[idx[k] // n, idx[k] % n] = vals[k]
-    convolve(src_p, r0, r1, spec_p, col_p, out_p, sym, threads)
+    convolve(src_p, r0, r1, col_p, out_p, sym, threads)
     for i in range(n):
         for j in range(n):
             u[i * n + j] = out_p[i, j]
@@ -368,8 +366,8 @@ def restrict_pre(pre, idx):
 def precondition(pre, pws, idx, r, z):
     """z = M r on the contact set idx."""
     if pre.kind == PRE_FFT:
-        h, psym, at, box, spec, col, out = pws
-        box_apply_set(psym, at, r, h, box, spec, col, out, z, pre.threads)
+        h, psym, at, box, col, out = pws
+        box_apply_set(psym, at, r, h, box, col, out, z, pre.threads)
     elif pre.kind == PRE_DIAGONAL:
         for k in range(idx.size):
             z[k] = pre.inv_diag[idx[k]] * r[k]
