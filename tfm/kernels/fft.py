@@ -6,8 +6,9 @@ a convolution allocates nothing. A linear convolution of a W x W box needs a per
 P >= 2 W - 1 (no images); the transform is pruned: only the rows that hold sources are
 transformed along the rows, and only the W wanted rows are transformed back. The rows'
 spectra are written straight into the column array and the columns are transformed in
-place: a separate spectrum array, zero-padded into the columns by pocketfft, cost 6-9 %
-of a convolution (one thread, P = 120-600).
+place: a separate spectrum array, zero-padded into the columns by pocketfft, made a
+convolution on one thread 1.09-1.18x slower at P = 192-960 (`python -m bench.run_bench
+--only fft`, both versions, 2026-11-24).
 
 Threads: each stage's 1-D transforms are cut into one part per Numba thread, each part one
 single-threaded pocketfft call. pocketfft works through a call's transforms in SIMD
