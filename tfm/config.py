@@ -36,9 +36,10 @@ ROUND_TOLS = (1e-7,)
 # (when there are more than one: NUMBA_NUM_THREADS=1 keeps a run on one core, as campaign
 # workers do). One convolution, medians of 200 on the quiet 2-core VM (`python -m
 # bench.run_bench --only fft`, 2026-11-24): P = 128, 0.071 ms either way; P = 192, 0.128 ms
-# on 2 threads vs 0.166 ms on one; P = 480, 0.69 vs 1.15 ms. Under heavy load a barrier can
-# wait a scheduler slice, so a run also times both ways at start (tfm.kernels.fft.
-# threads_pay) and keeps the faster.
+# on 2 threads vs 0.166 ms on one; P = 480, 0.69 vs 1.15 ms. Under load, or when the OpenMP
+# worker must be woken between parallel regions, threads can cost more than they save, so
+# the compiled solve picks the mode from its own steps (tfm.solver.ThreadChoice); the
+# Python-level FFTOperator.apply times both ways once at start (tfm.kernels.fft.threads_pay).
 FFT_THREADED_SIZE = 192
 
 

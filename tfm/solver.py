@@ -85,9 +85,11 @@ class ThreadChoice:
     The bits do not depend on the choice, only the time. A timing of a few convolutions at
     start (tfm.kernels.fft.threads_pay) proved a poor guide on the 2-core VM: whole 1/256
     curves took 2.1 s threaded in some processes and 3.5-4.1 s in others, 2.2-2.3 s serial
-    in all (2026-11-24, the second core's availability changes over seconds). So every
+    in all (2026-11-24; the slow runs point to waiting for the OpenMP worker to wake
+    between parallel regions: with OMP_WAIT_POLICY=active, 2.19-2.39 s threaded). So every
     cycle runs TRIAL steps in each mode, alternating, compares the wall time per unit of
-    work (CG iterations + rounds + 1) and holds the faster mode for HOLD steps. Standard
+    work (CG iterations + rounds + 1) and holds the faster mode for HOLD steps, from the
+    first step on (the start-up timing's mode is never used by the solve). Standard
     curve, one process per run, interleaved (2026-11-24): 1/512 16.1-16.8 s against
     19.3-20.8 s serial and 16.2-25.7 s with the start-up timing's choice; at 1/256 the
     trials cost a little (medians 2.47 s against 2.30 s with the start-up timing, which
