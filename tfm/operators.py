@@ -100,7 +100,8 @@ class FFTOperator:
 
     def threaded(self) -> bool:
         """Whether transforms of this grid's size run faster over the Numba threads, timed
-        once (tfm.kernels.fft.threads_pay); the bits are the same either way."""
+        once (tfm.kernels.fft.threads_pay), for ``apply`` only; the bits are the same
+        either way."""
         if self._threads_pay is None:
             sym = self.symbol(fftk.fast_len(2 * self.n - 1))
             self._threads_pay = fftk.threads_pay(self.n, sym, numba.get_num_threads())
@@ -111,12 +112,14 @@ class FFTOperator:
         return numba.get_num_threads() if self.threaded() else 1
 
     def compiled(self) -> FFTData:
-        """The operator's data for the compiled loop, with buffers for the whole-grid field."""
+        """The operator's data for the compiled loop, with buffers for the whole-grid field.
+        On one thread: the contact solve sets the mode step by step (tfm.solver.ThreadChoice),
+        so no start-up timing is spent on it."""
         start_threads()
         n = self.n
         P = fftk.fast_len(2 * n - 1)
         return FFTData(n, self.spacing, self.cut2, self.diag, self.syms, self.symbol(P),
-                       *fftk.buffers(n, P), self.threads())
+                       *fftk.buffers(n, P), 1)
 
     def apply(self, src, f_src, tgt=None):
         n = self.n
@@ -253,8 +256,9 @@ class FFTPreconditioner:
         return z
 
     def compiled(self) -> PreData:
+        """On one thread, as FFTOperator.compiled: the contact solve sets the mode."""
         self._data = pre_data(PRE_FFT, n=self.op.n, kinv=self.kinv, floor=self.floor, psyms=self.psyms,
-                              threads=self.op.threads())
+                              threads=1)
         return self._data
 
 

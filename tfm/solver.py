@@ -89,7 +89,8 @@ class ThreadChoice:
     between parallel regions: with OMP_WAIT_POLICY=active, 2.19-2.39 s threaded). So every
     cycle runs TRIAL steps in each mode, alternating, compares the wall time per unit of
     work (CG iterations + rounds + 1) and holds the faster mode for HOLD steps, from the
-    first step on (the start-up timing's mode is never used by the solve). Standard
+    first step on (the operator's and the preconditioner's compiled data start on one
+    thread, and no start-up timing is made for the solve). Standard
     curve, one process per run, interleaved (2026-11-24): 1/512 16.1-16.8 s against
     19.3-20.8 s serial and 16.2-25.7 s with the start-up timing's choice; at 1/256 the
     trials cost a little (medians 2.47 s against 2.30 s with the start-up timing, which
