@@ -74,6 +74,42 @@ def test_alpha_is_named_when_it_acts():
     assert "\\alpha$ = 0.75" in text and "K_{th}" in text and "1/128" in text and "paraboloid" in text
 
 
+def test_an_si_caption_names_the_work_of_adhesion_and_the_units():
+    """An SI record's threshold follows from gamma (k_th is None): the caption says so, with
+    E, nu and the units, instead of failing on the missing K_th (it did until 2026-11-24)."""
+    si = dict(units="si", youngs_modulus=1e6, poisson_ratio=0.5, radius=1e-3, shape="paraboloid",
+              spacing=3.125e-5, max_indent=2e-5, step=1e-6)
+    p = tfm.Params.from_dict(dict(si, work_of_adhesion=0.05))
+    text = plots.run_caption(p)
+    assert "\\gamma$ = 0.05 J/m$^2$" in text and "$E$ = $10^{6}$ Pa" in text and "\\nu$ = 0.5" in text
+    assert "$R$ = 0.001 m" in text and "step $10^{-6}$ m" in text
+    q = tfm.Params.from_dict(dict(si, f_th=2e-6, alpha=0))
+    assert "$F_{th}$ = $2\\times10^{-6}$ N" in plots.run_caption(q)
+
+
+def test_an_si_figure_draws_hertz_in_newtons_and_keeps_its_caption_inside():
+    """The Hertz line of an SI run is P = 4/3 E* sqrt(R) delta^1.5 with E* = E/(1 - nu^2) in
+    pascals (it was drawn in paper units, flat at zero against a curve in newtons), the axes
+    name the units, and the long caption is broken into lines that fit the figure."""
+    p = tfm.Params.from_dict(dict(units="si", youngs_modulus=2e6, poisson_ratio=0.3, radius=1e-3,
+                                  shape="paraboloid", work_of_adhesion=0.05, spacing=3.125e-5,
+                                  max_indent=2e-5, step=1e-6))
+    delta = np.linspace(0, 2e-5, 5)
+    curve = pd.DataFrame({"phase": ["load"] * 5, "indent": delta, "d": -delta, "force": delta,
+                          "contact_radius": delta, "n_contact": 1})
+    fig = plots.plot_curve(curve, p)
+    ax1, ax2 = fig.axes[:2]
+    hertz = [ln for ln in ax1.get_lines() if ln.get_label() == "Hertz"][0]
+    d, P = hertz.get_xdata(), hertz.get_ydata()
+    e_star = 2e6 / (1 - 0.3 ** 2)
+    np.testing.assert_allclose(P, 4 / 3 * e_star * np.sqrt(1e-3) * d ** 1.5, rtol=1e-12)   # round-off only
+    assert ax1.get_ylabel().startswith("force $P$ in N") and ax2.get_ylabel().endswith("in m")
+    caption = fig._suptitle.get_text()
+    assert caption.count("\n") == 1 and caption.replace(",\n", ", ") == plots.run_caption(p)
+    paper = tfm.Params.from_dict(dict(STANDARD, spacing=1 / 128))
+    assert "\n" not in plots.plot_curve(curve, paper)._suptitle.get_text()
+
+
 def test_jkr_scaling_axis_has_no_overlapping_ticks():
     from tfm.analysis import fit_line, fit_power_law
 

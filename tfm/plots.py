@@ -9,6 +9,7 @@ importing this module stays cheap and no global figure state is kept.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator, ScalarFormatter
 
 from . import theory
+from .units import force_scale
 
 PHASE_COLOURS = {"load": "tab:blue", "unload": "tab:red"}
 SPACING_COLOURS = ("tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink")
@@ -104,15 +106,21 @@ def _spacing_label(spacing):
 def run_caption(p) -> str:
     """The parameters that matter for a run, caption style (alpha only where it acts)."""
     shape = {"sphere": "sphere", "paraboloid": "paraboloid", "flat_punch": "flat punch"}[p.shape]
+    si = p.units == "si"
+    m, N = (" m", " N") if si else ("", "")
     if p.f_th is not None:
-        thr = f"$F_{{th}}$ = {number(p.f_th)}"
+        thr = f"$F_{{th}}$ = {number(p.f_th)}{N}"
+    elif si:                  # K_th follows from the work of adhesion (tfm.units)
+        thr = f"$F_{{th}} = K_{{th}}A^{{3/4}}$ from $\\gamma$ = {number(p.work_of_adhesion)} J/m$^2$"
     else:
         thr = f"$F_{{th}} = K_{{th}}A^{{\\alpha}}$, $K_{{th}}$ = {number(p.k_th)}, $\\alpha$ = {p.alpha:g}"
-    parts = [f"{shape} $R$ = {p.radius:g}", f"$\\Delta$ = {spacing_text(p.spacing)}", thr]
+    parts = [f"{shape} $R$ = {p.radius:g}{m}", f"$\\Delta$ = {spacing_text(p.spacing)}{m}", thr]
+    if si:
+        parts.append(f"$E$ = {number(p.youngs_modulus)} Pa, $\\nu$ = {p.poisson_ratio:g}")
     if p.control == "force":
-        parts.append(f"force control to $P_{{max}}$ = {number(p.peak_load)}")
+        parts.append(f"force control to $P_{{max}}$ = {number(p.peak_load)}{N}")
     else:
-        parts.append(f"$\\delta_{{max}}$ = {number(p.delta_max)}, step {number(p.step)}")
+        parts.append(f"$\\delta_{{max}}$ = {number(p.delta_max)}{m}, step {number(p.step)}{m}")
     if p.kernel != "boussinesq":
         parts.append(f"{p.kernel} kernel")
     if p.layout != "square":
@@ -120,6 +128,34 @@ def run_caption(p) -> str:
     if p.operator != "fft":
         parts.append(f"{p.operator} operator" + (f" ($\\theta$ = {p.theta:g})" if p.operator == "tree" else ""))
     return ", ".join(parts)
+
+
+# Visible characters of 8-pt caption text per inch of figure width (DejaVu Sans averages
+# about 4.4 pt a character; 15 leaves a margin for wide glyphs and math italics).
+CAPTION_CHARS_PER_INCH = 15
+
+
+def _visible_length(text: str) -> int:
+    """Characters a caption shows: a math-text command counts as one, markup as none."""
+    return len(re.sub(r"[${}^_]", "", re.sub(r"\\[a-zA-Z]+", "x", text)))
+
+
+def wrap_caption(text: str, width: float) -> str:
+    """The caption broken at its ", " separators into lines that fit ``width`` inches
+    (a long SI caption ran off both edges of the figure). Never inside math text."""
+    parts = text.split(", ")
+    if any(part.count("$") % 2 for part in parts):
+        return text
+    limit = CAPTION_CHARS_PER_INCH * width
+    lines, line = [], ""
+    for part in parts:
+        joined = f"{line}, {part}" if line else part
+        if line and _visible_length(joined) > limit:
+            lines.append(line + ",")
+            line = part
+        else:
+            line = joined
+    return "\n".join(lines + [line])
 
 
 def reference_label(p) -> str | None:
@@ -192,6 +228,7 @@ def draw_reference(ax1, ax2, p, dmax):
     else:
         P = theory.hertz_force(delta, p.radius)
         a = theory.hertz_radius(delta, p.radius)
+    P = P * force_scale(p)            # theory is in paper units; SI: L* = 1 m keeps the lengths
     ax1.plot(delta, P, "k--", lw=0.8, label=label)
     ax2.plot(P, a, "k--", lw=0.8, label=label if p.shape != "flat_punch" else None)
 
@@ -206,19 +243,21 @@ def plot_curve(curve, params=None, path=None, title=None, hertz=True):
     draw_branches(ax1, ax2, curve)
     if hertz and params is not None:
         draw_reference(ax1, ax2, params, float(curve["indent"].max()))
-    _curve_axes(ax1, ax2)
+    _curve_axes(ax1, ax2, params)
     if title is None and params is not None:
         title = run_caption(params)
     if title:
-        fig.suptitle(title, fontsize=8)
+        fig.suptitle(wrap_caption(title, fig.get_figwidth()), fontsize=8)
     return _save(fig, path)
 
 
-def _curve_axes(ax1, ax2):
-    ax1.set_xlabel(INDENT_LABEL)
-    ax1.set_ylabel(FORCE_LABEL)
-    ax2.set_xlabel(FORCE_LABEL)
-    ax2.set_ylabel("contact radius $a$")
+def _curve_axes(ax1, ax2, p=None):
+    si = p is not None and p.units == "si"
+    force = "force $P$ in N (compression > 0)" if si else FORCE_LABEL
+    ax1.set_xlabel(INDENT_LABEL + (" in m" if si else ""))
+    ax1.set_ylabel(force)
+    ax2.set_xlabel(force)
+    ax2.set_ylabel("contact radius $a$" + (" in m" if si else ""))
     for ax in (ax1, ax2):
         ax.axhline(0, color="0.7", lw=0.5)
     # one legend: (b) draws the same lines, and a second box found no free corner in a(P)
@@ -379,7 +418,7 @@ def plot_contact_map(fields, snap, curve=None, params=None, path=None):
     if curve is not None:
         marker = draw_curve_marker_panel(axes[1], curve)
         marker.set_data([-snap["d"]], [snap["force"]])
-    head = run_caption(params) + "\n" if params is not None else ""
+    head = wrap_caption(run_caption(params), fig.get_figwidth()) + "\n" if params is not None else ""
     fig.suptitle(head + snapshot_title(snap), fontsize=8)
     return _save(fig, path)
 

@@ -212,7 +212,7 @@ def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = Tr
         fig.set_dpi(dpi)
         canvas = FigureCanvasAgg(fig)
         marker = plots.draw_curve_marker_panel(ax_curve, curve)
-        head = plots.run_caption(params) + "\n" if params is not None else ""
+        head = plots.wrap_caption(plots.run_caption(params), fig.get_figwidth()) + "\n" if params is not None else ""
         title = fig.suptitle(head, fontsize=8)
         cmap = None
         writer = _mp4_writer(fig, out, fps, dpi) if out.suffix.lower() == ".mp4" else None
