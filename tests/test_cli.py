@@ -109,6 +109,69 @@ def test_default_output_is_named_by_run_id_so_runs_do_not_clobber(tmp_path, monk
     assert "exists; pass --overwrite" in capsys.readouterr().err
 
 
+SMALL_SI = ["--units", "si", "--youngs-modulus", "1e6", "--poisson-ratio", "0.5", "--work-of-adhesion", "0.05",
+            "--radius", "1e-3", "--shape", "paraboloid", "--spacing", "3.125e-5", "--max-indent", "2e-5",
+            "--step", "1e-6", "-q"]
+
+
+@pytest.mark.parametrize("args", [SMALL, SMALL_SI], ids=["paper units", "SI"])
+def test_the_figure_worker_draws_what_tfm_run_would_draw_itself(tmp_path, monkeypatch, args):
+    """tfm.plot_worker draws the figure from the written table, in its own process; the
+    PNG must be the one tfm run draws from its in-memory curve (byte for byte: same
+    Matplotlib, same data, same parameter record), in paper and in SI units."""
+    from tfm import plot_worker
+
+    started = []
+    real_start = plot_worker.start_worker
+    monkeypatch.setattr(plot_worker, "start_worker", lambda p: started.append(real_start(p)) or started[-1])
+    assert main(["run", *args, "-o", str(tmp_path / "worker.parquet")]) == 0
+    assert started and started[0] is not None and started[0].proc.returncode == 0
+    monkeypatch.setattr(plot_worker, "start_worker", lambda p: None)
+    assert main(["run", *args, "-o", str(tmp_path / "here.parquet")]) == 0
+    drawn = (tmp_path / "worker.png").read_bytes()
+    assert drawn[:4] == b"\x89PNG" and drawn == (tmp_path / "here.png").read_bytes()
+    assert not list(tmp_path.glob(".*"))
+
+
+def test_a_failing_figure_worker_leaves_the_figure_to_tfm_run(tmp_path, monkeypatch, capsys):
+    from tfm.plot_worker import PlotWorker
+
+    monkeypatch.setattr(PlotWorker, "command",
+                        (sys.executable, "-c", "import sys; sys.stdin.readline(); sys.exit('no fonts today')"))
+    assert main(["run", *SMALL, "-o", str(tmp_path / "c.parquet")]) == 0
+    assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
+    assert "figure's worker process failed (no fonts today); drawing the figure here" in capsys.readouterr().err
+
+
+def test_a_failed_run_ends_the_figure_worker(tmp_path, monkeypatch):
+    """A run that raises sends the worker no line and ends it: no figure, no temporary
+    file, no process left behind."""
+    from tfm import plot_worker
+
+    simulate_module = importlib.import_module("tfm.simulate")
+
+    started = []
+    real_start = plot_worker.start_worker
+    monkeypatch.setattr(plot_worker, "start_worker", lambda p: started.append(real_start(p)) or started[-1])
+
+    def crash(*args, **kwargs):
+        raise RuntimeError("the run broke")
+
+    monkeypatch.setattr(simulate_module, "simulate", crash)
+    with pytest.raises(RuntimeError, match="the run broke"):
+        main(["run", *SMALL, "-o", str(tmp_path / "c.parquet")])
+    assert started[0].proc.returncode is not None          # ended and reaped
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_large_grids_get_no_figure_worker():
+    from tfm.guards import n_springs
+    from tfm.plot_worker import MAX_SPRINGS, start_worker
+
+    p = Params.from_dict({"spacing": "1/512", "k_th": 0.02, "shape": "paraboloid", "max_indent": 0.05})
+    assert n_springs(p) > MAX_SPRINGS and start_worker(p) is None
+
+
 def test_a_failed_write_leaves_no_temporary_file(tmp_path, monkeypatch):
     import pyarrow.parquet as pq
 
@@ -120,6 +183,23 @@ def test_a_failed_write_leaves_no_temporary_file(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="No space"):
         main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "--no-plot"])
     assert list(tmp_path.iterdir()) == []
+
+
+def test_tfm_run_as_its_own_process_writes_the_table_and_the_figure(tmp_path):
+    """The process path of `tfm run` with the figure's worker: the same table and the same
+    PNG bytes as drawn here from that table."""
+    from tfm.plots import plot_curve
+    from tfm.viewcli import load_run
+
+    out = tmp_path / "c.parquet"
+    done = subprocess.run([sys.executable, "-m", "tfm", "run", *SMALL, "-o", str(out)], env=ENV,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "worker" not in done.stderr
+    curve, params, _ = load_run(out)
+    assert read_metadata(out)["summary"]["n_steps"] == len(curve) > 0
+    plot_curve(curve, params, tmp_path / "here.png")
+    assert (tmp_path / "c.png").read_bytes() == (tmp_path / "here.png").read_bytes()
 
 
 # ---- parameters and guards on the command line --------------------------------------

@@ -172,16 +172,16 @@ def checkpoint_path_for(curve_path: Path) -> Path:
     return curve_path.with_name(curve_path.stem + ".checkpoint.npz")
 
 
-def cmd_run(args) -> int:
+def _run_and_write(args, p: Params, notes, out: Path, ckpt: dict):
+    """`tfm run` from the announcement to the written table."""
     import warnings
 
-    from .guards import check, estimate_memory
+    from .guards import estimate_memory
+    from .progress import run_progress
     from .protocol import n_loading_steps
+    from .results import fields_path_for
+    from .simulate import RunWarning, simulate
 
-    p = _params_from_args(args)
-    notes = check(p)                      # refuses meaningless or oversized runs (exit 2)
-    out, plot_path = _plan_outputs(args, p)
-    ckpt = _checkpoint_options(args, p, out)
     if not args.quiet:
         print(f"tfm run {p.run_id}: spacing={p.spacing:.6g} F_th={p.threshold_force:.4g} "
               f"R={p.radius:g} shape={p.shape} kernel={p.kernel} operator={p.operator} "
@@ -189,28 +189,47 @@ def cmd_run(args) -> int:
               f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
     for note in notes:                    # stated before the run starts
         print(f"tfm: warning: {note}", file=sys.stderr)
-
-    from .progress import run_progress
-    from .simulate import RunWarning, simulate
-
     with warnings.catch_warnings(), run_progress(p, quiet=args.quiet) as progress:
         warnings.simplefilter("ignore", RunWarning)
-        from .results import fields_path_for
         res = simulate(p, progress=progress, fields_path=fields_path_for(out) if p.snapshots != "none" else None,
                        **ckpt)
     if res.provenance.get("resumed_at_step") and not args.quiet:
         print(f"continued from the checkpoint {ckpt['checkpoint']} at step {res.provenance['resumed_at_step']} "
               "(the steps before were computed by the run that was stopped)", file=sys.stderr)
     res.write_curve(out)
-    if plot_path is not None:
-        from .plots import plot_curve
+    return res
 
-        tmp = plot_path.with_name(f".{plot_path.stem}.{os.getpid()}.tmp{plot_path.suffix}")
-        try:
-            plot_curve(res.curve, p, tmp)
-            os.replace(tmp, plot_path)
-        finally:
-            tmp.unlink(missing_ok=True)
+
+def cmd_run(args) -> int:
+    from .guards import check
+    from .plot_worker import start_worker
+
+    p = _params_from_args(args)
+    notes = check(p)                      # refuses meaningless or oversized runs (exit 2)
+    out, plot_path = _plan_outputs(args, p)
+    ckpt = _checkpoint_options(args, p, out)
+    # the figure's worker imports and warms up while this process loads the engine and runs
+    worker = start_worker(p) if plot_path is not None else None
+    try:
+        res = _run_and_write(args, p, notes, out, ckpt)
+    except BaseException:
+        if worker is not None:
+            worker.cancel()
+        raise
+    if plot_path is not None:
+        failed = worker.draw(out, plot_path) if worker is not None else None
+        if failed:
+            print(f"tfm: note: the figure's worker process failed ({failed}); drawing the figure here",
+                  file=sys.stderr)
+        if worker is None or failed:
+            from .plots import plot_curve
+
+            tmp = plot_path.with_name(f".{plot_path.stem}.{os.getpid()}.tmp{plot_path.suffix}")
+            try:
+                plot_curve(res.curve, p, tmp)
+                os.replace(tmp, plot_path)
+            finally:
+                tmp.unlink(missing_ok=True)
     s = res.summary
     if not args.quiet:
         jump = ("jump_off_force", "jump_off_contact_radius") if p.control == "force" else ()

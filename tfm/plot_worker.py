@@ -1,0 +1,147 @@
+"""`tfm run`'s figure, drawn by a second process while the first computes the curve.
+
+Matplotlib, pandas and a figure's first drawing (fonts, the math-text parser) take about as
+long as a 1/128 curve, and such a curve runs on one core. So `tfm run` starts this worker
+before the run. The worker imports and draws a throwaway figure meanwhile, then waits for
+one line on stdin, ``{"table": ..., "plot": ...}``, and draws the figure from the written
+table exactly as `tfm plot` does (the table holds the curve and the parameter record).
+Without that line (the run failed or was interrupted) it exits without drawing. It answers
+``done`` on stdout once the figure is in place; anything else (a failure is reported on
+stderr) and `tfm run` draws the figure itself.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+# seconds `tfm run` waits for the figure once the table is written (then it draws it itself)
+WAIT = 120.0
+DONE = "done"
+# Larger grids get no worker: their curves take 15 s and more, against which the 0.3-0.5 s
+# saved do not count, and the idle worker would hold its 150 MiB (Matplotlib and pandas
+# loaded) through the whole run. 65536 springs: a 1/256 standard curve has 159^2, 1/512 307^2.
+MAX_SPRINGS = 65536
+
+
+def start_worker(p) -> PlotWorker | None:
+    """A worker for the run ``p``'s figure, or None (a large grid, or no process to be had:
+    `tfm run` then draws the figure itself)."""
+    from .guards import n_springs
+
+    if n_springs(p) > MAX_SPRINGS:
+        return None
+    try:
+        return PlotWorker(p.canonical_json())
+    except OSError:
+        return None
+
+
+class PlotWorker:
+    """The worker process, seen from `tfm run`."""
+
+    command = (sys.executable, "-m", "tfm.plot_worker")
+
+    def __init__(self, params_json: str):
+        self.proc = subprocess.Popen((*self.command, params_json), stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def _finish(self, line: str) -> tuple[str, str]:
+        try:
+            return self.proc.communicate(line, timeout=WAIT)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.communicate()
+            return "", f"no answer after {WAIT:g} s"
+
+    def draw(self, table: Path, plot: Path) -> str | None:
+        """Have the figure of ``table`` written to ``plot``: None once it is there, else
+        why not."""
+        try:
+            out, err = self._finish(json.dumps({"table": str(table), "plot": str(plot)}) + "\n")
+        except OSError as exc:                 # it died before reading its line
+            self.proc.kill()
+            self.proc.communicate()
+            return str(exc)
+        if out.strip() == DONE and self.proc.returncode == 0:
+            return None
+        lines = (err or "").strip().splitlines()
+        return lines[-1] if lines else f"exit status {self.proc.returncode}"
+
+    def cancel(self) -> None:
+        """No figure (the run failed or was interrupted): end the worker now. It has
+        written nothing, and a failed run must not wait for its warm-up."""
+        self.proc.kill()
+        self.proc.communicate()
+
+
+def _warm(params_json: str) -> None:
+    """Import what the figure needs and draw a throwaway one like the run's: the Hertz curve
+    of its parameters, in its units, with its caption. Fonts, the layout code and the math
+    text of the caption, the labels and most tick labels (parsed once per string, about 13 ms
+    each) are then ready when the real curve arrives."""
+    import tempfile
+
+    import numpy as np
+    import pandas as pd
+
+    from . import theory
+    from .params import Params
+    from .plots import plot_curve
+    from .results import CURVE_COLUMNS
+    from .units import force_scale
+
+    try:
+        p = Params.from_dict(json.loads(params_json))
+        dmax, radius, scale = p.delta_max, p.radius, force_scale(p)
+    except Exception:                    # the real figure will say what is wrong
+        p, dmax, radius, scale = None, 0.05, 1.0, 1.0
+    n = 16
+    indent = np.r_[np.linspace(0, dmax, n), np.linspace(dmax, -0.1 * dmax, n)]
+    curve = pd.DataFrame({c: np.zeros(2 * n) for c in CURVE_COLUMNS})
+    curve["phase"] = ["load"] * n + ["unload"] * n
+    curve["indent"], curve["d"] = indent, -indent
+    curve["force"] = theory.hertz_force(np.abs(indent), radius) * scale * np.sign(indent)
+    curve["contact_radius"] = theory.hertz_radius(np.abs(indent), radius)
+    curve["n_contact"] = 1
+    with tempfile.TemporaryDirectory() as tmp:     # saved as the real one: same style, dpi, caches
+        plot_curve(curve, p, Path(tmp) / "warm.png")
+    import pyarrow.parquet  # noqa: F401  (the table is read with it)
+
+
+def main(params_json: str) -> int:
+    _warm(params_json)
+    line = sys.stdin.readline()
+    if not line.strip():
+        return 0
+    job = json.loads(line)
+    from .plots import plot_curve
+    from .viewcli import load_run
+
+    table, plot = Path(job["table"]), Path(job["plot"])
+    curve, params, _ = load_run(table)
+    if params is None:               # tfm run would draw it with the caption: let it
+        raise ValueError(f"{table}: the parameter record did not rebuild")
+    tmp = plot.with_name(f".{plot.stem}.{os.getpid()}.tmp{plot.suffix}")
+    try:
+        plot_curve(curve, params, tmp)
+        os.replace(tmp, plot)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        status = main(sys.argv[1] if len(sys.argv) > 1 else "{}")
+    except Exception as exc:                  # reported to tfm run, which draws the figure itself
+        print(f"{type(exc).__name__}: {exc}", file=sys.stderr)
+        sys.exit(1)
+    if status == 0:
+        print(DONE, flush=True)
+    sys.stderr.flush()
+    # the figure is written and renamed: skip the interpreter's teardown of Matplotlib and
+    # pandas (0.2 s), which tfm run would otherwise wait for
+    os._exit(status)
