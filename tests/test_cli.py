@@ -186,8 +186,9 @@ def test_a_failed_write_leaves_no_temporary_file(tmp_path, monkeypatch):
 
 
 def test_tfm_run_as_its_own_process_writes_the_table_and_the_figure(tmp_path):
-    """The process path of `tfm run` with the figure's worker: the same table and the same
-    PNG bytes as drawn here from that table."""
+    """The process path of `tfm run`: the figure's worker, the collector left off during the
+    run and frozen at exit (tfm.cli.main). Same table and same PNG bytes as drawn here from
+    that table."""
     from tfm.plots import plot_curve
     from tfm.viewcli import load_run
 

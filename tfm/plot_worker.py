@@ -134,6 +134,8 @@ def main(params_json: str) -> int:
 
 
 if __name__ == "__main__":
+    import gc
+    gc.disable()                             # a short life, no garbage cycles to speak of (tfm.cli.main)
     try:
         status = main(sys.argv[1] if len(sys.argv) > 1 else "{}")
     except Exception as exc:                  # reported to tfm run, which draws the figure itself
