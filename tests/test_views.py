@@ -110,6 +110,26 @@ def test_an_si_figure_draws_hertz_in_newtons_and_keeps_its_caption_inside():
     assert "\n" not in plots.plot_curve(curve, paper)._suptitle.get_text()
 
 
+def test_captions_and_references_of_height_maps_rough_bodies_and_disorder(tmp_path):
+    """A height-map record has no radius in its caption and no closed-form reference (the
+    caption raised a KeyError, which failed tfm run after the table, and the flat punch's
+    formula would have been drawn); roughness and threshold disorder are named, and the
+    Hertz line of a rough body says that it is the smooth one."""
+    np.save(tmp_path / "map.npy", np.zeros((40, 40)))
+    hm = tfm.Params.from_dict(dict(shape="height_map", height_map=str(tmp_path / "map.npy"), map_pixel_size=1 / 20,
+                                   spacing=1 / 16, f_th=0, max_indent=0.01, step=1e-3))
+    text = plots.run_caption(hm)
+    assert text.startswith("height map map.npy, $\\Delta$ = 1/16") and "$R$" not in text
+    assert plots.reference_label(hm) is None
+    rough = tfm.Params.from_dict(dict(STANDARD, spacing=1 / 32, rms_height=1e-3, roughness_seed=3,
+                                      threshold_disorder="weibull", disorder_width=0.3, disorder_seed=2))
+    text = plots.run_caption(rough)
+    assert "rough ($H$ = 0.8, rms height 0.001, seed 3)" in text
+    assert "weibull $F_{th}$ disorder 0.3 (seed 2)" in text
+    assert plots.reference_label(rough) == "Hertz (smooth)"
+    assert plots.reference_label(tfm.Params.from_dict(dict(STANDARD, spacing=1 / 32))) == "Hertz"
+
+
 def test_jkr_scaling_axis_has_no_overlapping_ticks():
     from tfm.analysis import fit_line, fit_power_law
 

@@ -105,16 +105,25 @@ def _spacing_label(spacing):
 
 def run_caption(p) -> str:
     """The parameters that matter for a run, caption style (alpha only where it acts)."""
-    shape = {"sphere": "sphere", "paraboloid": "paraboloid", "flat_punch": "flat punch"}[p.shape]
     si = p.units == "si"
     m, N = (" m", " N") if si else ("", "")
+    if p.shape == "height_map":
+        body = "height map " + Path(p.height_map).name.replace("$", "\\$")
+    else:
+        body = {"sphere": "sphere", "paraboloid": "paraboloid", "flat_punch": "flat punch"}[p.shape]
+        body += f" $R$ = {p.radius:g}{m}"
     if p.f_th is not None:
         thr = f"$F_{{th}}$ = {number(p.f_th)}{N}"
     elif si:                  # K_th follows from the work of adhesion (tfm.units)
         thr = f"$F_{{th}} = K_{{th}}A^{{3/4}}$ from $\\gamma$ = {number(p.work_of_adhesion)} J/m$^2$"
     else:
         thr = f"$F_{{th}} = K_{{th}}A^{{\\alpha}}$, $K_{{th}}$ = {number(p.k_th)}, $\\alpha$ = {p.alpha:g}"
-    parts = [f"{shape} $R$ = {p.radius:g}{m}", f"$\\Delta$ = {spacing_text(p.spacing)}{m}", thr]
+    parts = [body, f"$\\Delta$ = {spacing_text(p.spacing)}{m}", thr]
+    if p.rms_height > 0 or p.rms_slope > 0:
+        rms = f"rms height {number(p.rms_height)}{m}" if p.rms_height > 0 else f"rms slope {number(p.rms_slope)}"
+        parts.append(f"rough ($H$ = {p.hurst:g}, {rms}, seed {p.roughness_seed})")
+    if p.threshold_disorder != "none":
+        parts.append(f"{p.threshold_disorder} $F_{{th}}$ disorder {p.disorder_width:g} (seed {p.disorder_seed})")
     if si:
         parts.append(f"$E$ = {number(p.youngs_modulus)} Pa, $\\nu$ = {p.poisson_ratio:g}")
     if p.control == "force":
@@ -160,12 +169,13 @@ def wrap_caption(text: str, width: float) -> str:
 
 def reference_label(p) -> str | None:
     """The analytical reference drawn for a run, named for what it is."""
-    if p is None or p.kernel != "boussinesq":
-        return None
+    if p is None or p.kernel != "boussinesq" or p.shape == "height_map":
+        return None                    # a measured topography has no closed-form curve
+    smooth = ", smooth" if p.rms_height > 0 or p.rms_slope > 0 else ""
     if p.shape == "paraboloid":
-        return "Hertz"
+        return f"Hertz{' (smooth)' if smooth else ''}"
     if p.shape == "sphere":
-        return "Hertz (paraboloid approximation of the sphere)"
+        return f"Hertz (paraboloid approximation of the sphere{smooth})"
     return "Boussinesq flat punch, $P = 2E^*R\\delta$"
 
 
