@@ -151,6 +151,30 @@ def stored_run(tmp_path_factory):
     return out
 
 
+def test_the_views_of_an_si_run_show_its_snapshots_in_newtons(tmp_path):
+    """Snapshots are stored in paper units; the views of an SI run scale their forces by F*
+    (they showed the marker at P = -7e-11 beside a curve in newtons, and F_th likewise).
+    Against the SI curve table and the SI record: the same P at every stored step, to
+    round-off (one multiplication each way), and F_th in newtons."""
+    from tfm.units import force_scale
+    from tfm.viewcli import _need_fields, load_run
+
+    out = tmp_path / "si.parquet"
+    assert main(["run", "--units", "si", "--youngs-modulus", "1e6", "--poisson-ratio", "0.5",
+                 "--work-of-adhesion", "0.05", "--radius", "1e-3", "--shape", "paraboloid", "--spacing", "1e-5",
+                 "--step", "5e-7", "--snapshots", "events", "-q", "--no-plot", "-o", str(out)]) == 0
+    curve, params, fpath = load_run(out)
+    fields = _need_fields(out, fpath, params)
+    assert force_scale(params) > 1e6                                  # F* in newtons: far from 1
+    by_step = dict(zip(curve["step"], curve["force"]))
+    for k in fields.steps:
+        snap = fields.snapshot(int(k))
+        assert snap["force"] == pytest.approx(by_step[int(k)], rel=1e-12, abs=1e-30)
+        con = np.asarray(snap["state"]) == 1
+        assert -float(np.asarray(snap["F"])[con].sum()) == pytest.approx(by_step[int(k)], rel=1e-9, abs=1e-15)
+    assert float(np.nanmax(fields.f_th)) == pytest.approx(params.threshold_force, rel=1e-12)
+
+
 def test_plot_and_show_from_a_stored_run(stored_run, capsys):
     assert main(["plot", str(stored_run.parent)]) == 0
     assert stored_run.with_suffix(".png").stat().st_size > 10_000

@@ -237,6 +237,16 @@ class Fields:
         self.params = json.loads(self.attrs["params"])
         self.steps = np.sort(self._steps)
         self._h5 = None
+        self.force_scale = 1.0
+
+    def use_force_scale(self, scale: float) -> None:
+        """Give forces (F, f_th, force) times ``scale`` from now on: the file holds paper
+        units, and an SI run's views show newtons (scale = tfm.units.force_scale(params)
+        of the run's own record; lengths keep their numbers, L* = 1 m)."""
+        ratio = float(scale) / self.force_scale
+        self.f_th = self.f_th * ratio
+        self.force = self.force * ratio
+        self.force_scale = float(scale)
 
     def event_step(self, event: str) -> int | None:
         value = self.attrs.get(f"{event}_step")
@@ -257,6 +267,8 @@ class Fields:
 
             self._h5 = h5py.File(self.path, "r")
         out = {name: self._h5[name][i] for name in ("F", "u", "state")}
+        if self.force_scale != 1.0:
+            out["F"] = out["F"] * self.force_scale
         out.update(step=int(step), d=float(self.d[i]), force=float(self.force[i]),
                    n_contact=int(self.n_contact[i]), event=self.events[i])
         return out

@@ -88,13 +88,17 @@ def load_run(path: Path):
     return curve, params, (fields if fields.exists() else None)
 
 
-def _need_fields(path, fields):
+def _need_fields(path, fields, params):
     if fields is None:
         raise ViewError(f"{path}: the run stored no field snapshots; rerun it with --snapshots events "
                         "(or --snapshots K for every K-th step)")
     from .snapshots import Fields
+    from .units import force_scale
 
-    return Fields(fields)
+    out = Fields(fields)
+    if params is not None:
+        out.use_force_scale(force_scale(params))      # paper units on file; an SI curve is in N
+    return out
 
 
 def pick_step(fields, step: str) -> int:
@@ -151,7 +155,7 @@ def _show(args) -> Path:
 
     path = resolve_run(args.run)
     curve, params, fpath = load_run(path)
-    fields = _need_fields(path, fpath)
+    fields = _need_fields(path, fpath, params)
     k = pick_step(fields, args.step)
     out = Path(args.output) if args.output else path.with_name(f"{path.stem}.step{k}.png")
     plot_contact_map(fields, fields.snapshot(k), curve, params, out)
@@ -161,7 +165,7 @@ def _show(args) -> Path:
 def _animate(args) -> Path:
     path = resolve_run(args.run)
     curve, params, fpath = load_run(path)
-    fields = _need_fields(path, fpath)
+    fields = _need_fields(path, fpath, params)
     out = Path(args.output) if args.output else path.with_suffix(".gif")
     n = animate(fields, curve, params, out, fps=args.fps, unload_only=not args.all_phases)
     print(f"{n} frames", file=sys.stderr)
