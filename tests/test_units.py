@@ -1,11 +1,14 @@
 """Physical units (tfm.units): SI runs, K_th from the work of adhesion, scaling, bad input."""
 import math
+import warnings
 
 import numpy as np
 import pytest
 
 import tfm
 from tfm.campaign.spec import spec_from_dict
+from tfm.guards import check
+from tfm.theory import auto_max_indent_uncapped
 from tfm.params import ParameterError, Params
 from tfm.results import read_metadata
 from tfm.theory import JKR_COEFFICIENT
@@ -82,6 +85,42 @@ def test_to_paper_keeps_lengths_and_scales_forces():
     f = Params.from_dict(dict(SI, work_of_adhesion=None, f_th=1e-6, spacing=R / 16, step=R * 1e-3,
                               shape="paraboloid", max_indent=R * 0.02))
     assert to_paper(f).f_th == pytest.approx(1e-6 / force_scale(f))
+
+
+@pytest.mark.parametrize("max_load", [None, 6e-4])
+def test_si_force_control_loads_are_newtons(max_load):
+    """Under force control an SI run's loads are in newtons: an explicit max_load (it was
+    passed to the solver unscaled, as a paper-units load F* = 4e6 N times larger), or the
+    Hertz load at max_indent, P = 4/3 E* sqrt(R) delta^1.5 with E* = E/(1 - nu^2) (it was
+    reported in paper units). The loading branch holds each target load, so its largest
+    force is the peak load to the solve's tolerance; the jump-off force is in newtons."""
+    # 6e-4 N: a preload (4.8 um) below the JKR estimate (5.7 um), which is stated
+    extra = {"max_load": max_load} if max_load else {"max_indent": 6e-6}
+    p = Params.from_dict(dict(SI, spacing=1e-5, step=2.5e-7, shape="paraboloid", control="force", **extra))
+    e_star = E / (1 - NU ** 2)
+    peak = max_load or 4 / 3 * e_star * math.sqrt(R) * 6e-6 ** 1.5
+    assert p.peak_load == pytest.approx(peak, rel=1e-12)             # closed form against closed form
+    q = to_paper(p)
+    assert q.peak_load * force_scale(p) == pytest.approx(peak, rel=1e-12)
+    notes = check(p, memory=False)
+    if max_load:        # the preload is the Hertz depth of that load, in metres
+        depth = (3 * max_load / (4 * e_star * math.sqrt(R))) ** (2 / 3)
+        assert p.delta_max == pytest.approx(depth, rel=1e-12)
+        wanted = auto_max_indent_uncapped(to_paper(p))
+        assert wanted > depth and notes == [
+            f"max_load: its Hertz preload is {depth:.4g} (the JKR estimate asks for {wanted:.4g}); "
+            f"the preload may be too shallow for the pull-off; {math.ceil(depth / 2.5e-7)} loading steps"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", tfm.RunWarning)               # the note above, as a warning
+        res = tfm.simulate(p)
+    assert res.summary["warnings"] == "; ".join(notes)
+    load = res.curve[res.curve["phase"] == "load"]
+    # 1e-6: the load is held by a Newton step on F(d) per load step, exact up to the CG
+    # tolerance (1e-10) times the condition of the contact set's forces
+    assert load["force"].max() == pytest.approx(peak, rel=1e-6)
+    held = res.curve[(res.curve["phase"] == "unload") & (res.curve["n_contact"] > 0)]
+    assert res.summary["jump_off_force"] == pytest.approx(-held["force"].iloc[-1], rel=1e-12)
+    assert 1e-5 < res.summary["jump_off_force"] < 1e-3                 # newtons, a JKR-size load
 
 
 def test_units_parameters_sweep_in_a_campaign():

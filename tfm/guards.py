@@ -175,7 +175,8 @@ def check(p, memory: bool = True) -> list[str]:
 
         wanted = auto_max_indent_uncapped(p)
         if wanted > p.delta_max * (1 + 1e-12):
-            notes.append(f"max_indent: auto preload capped at 0.5 R = {p.delta_max:.4g} (the JKR "
-                         f"estimate asks for {wanted:.4g}); the preload may be too shallow for the "
-                         f"pull-off; {math.ceil(steps)} loading steps")
+            why = ("max_load: its Hertz preload is" if p.control == "force" and p.max_load is not None
+                   else "max_indent: auto preload capped at 0.5 R =")
+            notes.append(f"{why} {p.delta_max:.4g} (the JKR estimate asks for {wanted:.4g}); the "
+                         f"preload may be too shallow for the pull-off; {math.ceil(steps)} loading steps")
     return notes

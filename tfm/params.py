@@ -174,7 +174,8 @@ class Params:
         if self.max_load is not None:
             return float(self.max_load)
         from .theory import hertz_force
-        return float(hertz_force(self.delta_max, self.radius))
+        from .units import force_scale           # theory is in paper units (SI: L* = 1 m)
+        return float(hertz_force(self.delta_max, self.radius)) * force_scale(self)
 
     @property
     def load_decrement(self) -> float:
@@ -185,13 +186,13 @@ class Params:
     def delta_max(self) -> float:
         """The preload depth, resolving ``max_indent="auto"`` (under force control with an
         explicit max_load: the Hertz depth of that load, which sizes the grid)."""
+        if self.max_indent == "auto" and self.units == "si":
+            from .units import to_paper     # same lengths in paper units with L* = 1 m
+            return to_paper(self).delta_max
         if self.max_indent == "auto" and getattr(self, "max_load", None) is not None:
             from .theory import hertz_indent
             return float(hertz_indent(self.max_load, self.radius))
         if self.max_indent == "auto":
-            if self.units == "si":          # same lengths in paper units with L* = 1 m
-                from .units import to_paper
-                return to_paper(self).delta_max
             from .theory import auto_max_indent
             return auto_max_indent(self)
         return float(self.max_indent)

@@ -132,6 +132,11 @@ def to_paper(p):
         changes.update(k_th=k_th_si(p) * LENGTH_SCALE_SI ** 1.5 / F, f_th=None)
     else:
         changes.update(f_th=p.f_th / F, k_th=None)
+    # force control: the loads are forces too
+    if p.max_load is not None:
+        changes["max_load"] = p.max_load / F
+    if p.load_step is not None:
+        changes["load_step"] = p.load_step / F
     import dataclasses
     return dataclasses.replace(p, **changes)
 
@@ -146,7 +151,7 @@ def to_si_curve(curve, p):
 def to_si_summary(summary: dict, p) -> dict:
     out = dict(summary)
     F = force_scale(p)
-    for key in ("pull_off_force", "max_force", "f_th"):
+    for key in ("pull_off_force", "max_force", "f_th", "jump_off_force"):
         out[key] = out[key] * F
     return out
 
