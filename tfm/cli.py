@@ -222,14 +222,8 @@ def cmd_run(args) -> int:
             print(f"tfm: note: the figure's worker process failed ({failed}); drawing the figure here",
                   file=sys.stderr)
         if worker is None or failed:
-            from .plots import plot_curve
-
-            tmp = plot_path.with_name(f".{plot_path.stem}.{os.getpid()}.tmp{plot_path.suffix}")
-            try:
-                plot_curve(res.curve, p, tmp)
-                os.replace(tmp, plot_path)
-            finally:
-                tmp.unlink(missing_ok=True)
+            from .plots import write_curve_figure
+            write_curve_figure(res.curve, p, plot_path)
     s = res.summary
     if not args.quiet:
         jump = ("jump_off_force", "jump_off_contact_radius") if p.control == "force" else ()

@@ -261,6 +261,21 @@ def plot_curve(curve, params=None, path=None, title=None, hertz=True):
     return _save(fig, path)
 
 
+def write_curve_figure(curve, params, path) -> Path:
+    """``plot_curve`` saved through a temporary name beside ``path``: an interrupted save
+    leaves no half-written figure, and no stray temporary file."""
+    import os
+
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        plot_curve(curve, params, tmp)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
 def _curve_axes(ax1, ax2, p=None):
     si = p is not None and p.units == "si"
     force = "force $P$ in N (compression > 0)" if si else FORCE_LABEL

@@ -141,13 +141,11 @@ def _guard(fn, args) -> int:
 
 
 def _plot(args) -> Path:
-    from .plots import plot_curve
+    from .plots import write_curve_figure
 
     path = resolve_run(args.run)
     curve, params, _ = load_run(path)
-    out = Path(args.output) if args.output else path.with_suffix(".png")
-    plot_curve(curve, params, out)
-    return out
+    return write_curve_figure(curve, params, Path(args.output) if args.output else path.with_suffix(".png"))
 
 
 def _show(args) -> Path:
