@@ -157,13 +157,25 @@ def test_height_map_run_id_follows_content_not_path(tmp_path):
     kw = dict(shape="height_map", spacing=1 / 32, f_th=0.0, max_indent=1e-3, step=1e-4)
     pa, pb, pc = (Params(height_map=m, **kw) for m in (a, b, c))
     assert pa.height_map_hash == pb.height_map_hash != pc.height_map_hash
-    assert pc.run_id != pa.run_id
+    assert pa.run_id == pb.run_id != pc.run_id
     # rebuilt from its own record (a table row), the same run; after the file changed, refused
     assert Params.from_dict(pa.to_dict()).run_id == pa.run_id
     np.save(a, np.zeros((41, 41)))
     with pytest.raises(ParameterError, match="height_map: the content .* changed"):
         Params.from_dict(pa.to_dict())
     assert pa.replace(height_map=c).height_map_hash == pc.height_map_hash
+
+
+def test_height_map_record_is_usable_from_any_folder(tmp_path, monkeypatch):
+    """A map given by a relative path is stored as an absolute one: the record rebuilds
+    (and finds its map) from another working directory, with the same run id."""
+    _map(tmp_path, "rel.npy")
+    monkeypatch.chdir(tmp_path)
+    p = Params(shape="height_map", height_map="rel.npy", spacing=1 / 32, f_th=0.0, max_indent=1e-3, step=1e-4)
+    assert p.height_map == str(tmp_path / "rel.npy")
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    assert Params.from_dict(p.to_dict()).run_id == p.run_id
 
 
 def test_height_map_lands_on_springs_and_interpolates(tmp_path):

@@ -23,6 +23,7 @@ import hashlib
 import json
 import math
 import numbers
+import os
 import re
 import warnings
 from dataclasses import dataclass, fields
@@ -290,7 +291,10 @@ _LATER_FIELDS = {f.name: f.default for f in fields(Params)
                                "control", "max_load", "load_step", "snapshots")}
 
 
-NOT_HASHED = ("allow",)      # fields that change no number, so not part of the run id
+# fields that change no number, so not part of the run id: ``allow``; the map's path
+# (the map enters through height_map_hash, its content: the same heights under another
+# path or name are the same run)
+NOT_HASHED = ("allow", "height_map")
 
 
 def _kind(annotation: str) -> str:
@@ -330,6 +334,9 @@ def _normalize(p: Params) -> None:
     if isinstance(p.allow, str):
         names = sorted({a.strip() for a in p.allow.split(",") if a.strip()})
         object.__setattr__(p, "allow", ",".join(names))
+    if isinstance(p.height_map, (str, os.PathLike)) and str(p.height_map):
+        # absolute: a stored record finds its map from any working directory
+        object.__setattr__(p, "height_map", os.path.abspath(os.path.expanduser(str(p.height_map))))
 
 
 def _rough(p: Params) -> bool:

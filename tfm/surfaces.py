@@ -236,6 +236,8 @@ class HeightMap:
         digest.update(np.ascontiguousarray(heights, dtype="<f8").tobytes())
         if pixel_size is not None:
             digest.update(repr(float(pixel_size)).encode())
+        if unit is not None:                 # scales heights and pixel (unit_to_metres)
+            digest.update(unit.encode())
         self.sha256 = digest.hexdigest()
 
 
