@@ -112,3 +112,37 @@ def test_campaign_stores_one_fields_file_per_run_and_points_to_it(tmp_path):
 def test_bad_snapshot_values_fail_early(bad, message):
     with pytest.raises(tfm.params.ParameterError, match=message):
         tfm.Params.from_dict(bad)
+
+
+def test_an_si_runs_file_holds_its_own_record_in_newtons(tmp_path):
+    """The file of an SI run carries that run's record and run id (it held the paper-units
+    twin's, so it matched no table and had lost E, nu and gamma) and is in newtons and
+    metres like the table: read raw, without tfm's views. Forces are F* times the stored
+    force_scale (one multiplication: 1e-12 relative covers the summation order)."""
+    import h5py
+    import json
+
+    from tfm.units import force_scale, to_paper
+
+    path = tmp_path / "si.fields.nc"
+    res = tfm.simulate(units="si", youngs_modulus=1e6, poisson_ratio=0.5, work_of_adhesion=0.05, radius=1e-3,
+                       shape="paraboloid", spacing=1e-5, step=5e-7, snapshots="events", fields_path=path)
+    p = res.params
+    with h5py.File(path, "r") as f:
+        attrs = dict(f.attrs)
+        assert attrs["run_id"] == p.run_id != to_paper(p).run_id
+        assert json.loads(attrs["params"])["youngs_modulus"] == 1e6
+        assert (attrs["force_unit"], attrs["length_unit"]) == ("N", "m")
+        assert attrs["force_scale"] == force_scale(p) > 1e6
+        assert f["F"].attrs["units"] == "N" and f["u"].attrs["units"] == "m"
+        assert json.loads(attrs["summary"])["force_unit"] == "N"
+        by_step = dict(zip(res.curve["step"], res.curve["force"]))
+        for i, k in enumerate(f["step"][...]):
+            assert f["force"][i] == pytest.approx(by_step[int(k)], rel=1e-12)
+            assert -f["F"][i].sum() == pytest.approx(by_step[int(k)], rel=1e-12)
+        assert np.nanmax(f["f_th"][...]) == pytest.approx(p.threshold_force, rel=1e-12)
+    # and the views, which scale a file to its table's units, leave it as it is
+    fields = Fields(path)
+    fields.use_force_scale(force_scale(p))
+    k = int(fields.steps[-1])
+    assert fields.snapshot(k)["force"] == pytest.approx(by_step[k], rel=1e-12)

@@ -67,7 +67,7 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
         from .snapshots import SnapshotWriter, temporary_fields_path
 
         fields_path = fields_path or temporary_fields_path()
-        writer = SnapshotWriter(fields_path, q, layout, prob)   # fields in paper units
+        writer = SnapshotWriter(fields_path, p, layout, prob)   # the run's record and units
 
     def observe(state, rec):
         if writer is not None:

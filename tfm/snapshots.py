@@ -16,7 +16,12 @@ Layout::
                 phase, event ("" or labels such as "every_10", "pull_off,first_snap")
     fields      F (spring force, tension > 0), u (displacement), state
                 (0 never in contact, 1 in contact, 2 released: was in contact, is not)
-    attributes  run_id, params (JSON), summary (JSON), <event>_step for each event
+    attributes  run_id, params (JSON), summary (JSON), <event>_step for each event,
+                force_unit, length_unit, force_scale
+
+An SI run's file is in newtons and metres, like its table, and holds the run's own SI
+record and run id; the run is solved as its paper-units twin (tfm.units), so forces are
+written times force_scale (newtons per F*; lengths keep their numbers, L* = 1 m).
 
 ``snapshots = "events"`` stores the maximum load (largest compressive force), the
 pull-off (largest tensile force), the first snap and the last step in contact;
@@ -36,9 +41,12 @@ from pathlib import Path
 import numpy as np
 
 from .results import _json_default, tfm_version
+from .units import force_scale
 
 STATE_NEVER, STATE_CONTACT, STATE_RELEASED = 0, 1, 2
 EVENTS = ("max_load", "pull_off", "first_snap", "last_contact")
+# CF unit strings of (length, force, area) per unit system
+CF_UNITS = {"paper": ("L*", "F*", "L*^2"), "si": ("m", "N", "m^2")}
 
 
 def temporary_fields_path() -> Path:
@@ -63,7 +71,9 @@ def _plain(rec) -> dict:
 
 
 class SnapshotWriter:
-    """Streams snapshots of one run to ``path`` (through a temporary file renamed at close)."""
+    """Streams snapshots of one run to ``path`` (through a temporary file renamed at close).
+    ``p`` is the run's own record; ``layout`` and ``prob`` (and the states observed) are
+    those of the solve, in paper units."""
 
     def __init__(self, path, p, layout, prob):
         import h5netcdf
@@ -81,6 +91,11 @@ class SnapshotWriter:
         self._best_load = self._best_pull = self._prev = None
         self._first_snap_done = False
         self._events: dict[str, int] = {}
+        self.scale = force_scale(p)           # newtons per F* (1 in paper units)
+        L, F_, A = CF_UNITS[p.units]
+        units = ("the paper's nondimensional units: length L*, force F* = 2 pi G L*^2 / (1 - nu)"
+                 if p.units == "paper" else
+                 f"SI: lengths in m, forces in N (solved in the paper's units, L* = 1 m, F* = {self.scale!r} N)")
         f = self._f = h5netcdf.File(self._tmp, "w")
         f.attrs.update({
             "title": "tfm field snapshots (threshold-force model of adhesion)",
@@ -88,7 +103,10 @@ class SnapshotWriter:
             "source": f"tfm {tfm_version()}",
             "run_id": p.run_id,
             "params": p.canonical_json(),
-            "units": "the paper's nondimensional units: length L*, force F* = 2 pi G L*^2 / (1 - nu)",
+            "units": units,
+            "length_unit": L,
+            "force_unit": F_,
+            "force_scale": self.scale,
             "sign_convention": "F > 0 is tension; force = -sum(F) is compressive-positive; indent = -d",
             "snapshots": str(p.snapshots),
         })
@@ -98,21 +116,21 @@ class SnapshotWriter:
             space = ("x", "y")
             xs = layout.x.reshape(self.grid)[:, 0]
             ys = layout.y.reshape(self.grid)[0, :]
-            self._var("x", ("x",), xs, "spring x coordinate", "L*")
-            self._var("y", ("y",), ys, "spring y coordinate", "L*")
+            self._var("x", ("x",), xs, "spring x coordinate", L)
+            self._var("y", ("y",), ys, "spring y coordinate", L)
         else:
             f.dimensions = {"step": None, "spring": layout.n}
             space = ("spring",)
-            self._var("x", space, layout.x, "spring x coordinate", "L*")
-            self._var("y", space, layout.y, "spring y coordinate", "L*")
+            self._var("x", space, layout.x, "spring x coordinate", L)
+            self._var("y", space, layout.y, "spring y coordinate", L)
         self._space = space
         x0 = np.where(np.isfinite(prob.x0), prob.x0, np.nan)
-        self._var("x0", space, self._shape(x0), "undeformed surface height (apex at 0; NaN: no surface)", "L*")
-        self._var("f_th", space, self._shape(prob.f_th), "tensile threshold force of the spring", "F*")
-        self._var("area", space, self._shape(prob.area), "tributary area of the spring", "L*^2")
+        self._var("x0", space, self._shape(x0), "undeformed surface height (apex at 0; NaN: no surface)", L)
+        self._var("f_th", space, self._shape(prob.f_th * self.scale), "tensile threshold force of the spring", F_)
+        self._var("area", space, self._shape(prob.area), "tributary area of the spring", A)
         self._var("step", ("step",), None, "step of the curve table", "1", dtype="i8")
-        self._var("d", ("step",), None, "height of the rigid flat (indentation = -d)", "L*", dtype="f8")
-        self._var("force", ("step",), None, "total force, compression > 0 (= -sum F)", "F*", dtype="f8")
+        self._var("d", ("step",), None, "height of the rigid flat (indentation = -d)", L, dtype="f8")
+        self._var("force", ("step",), None, "total force, compression > 0 (= -sum F)", F_, dtype="f8")
         self._var("n_contact", ("step",), None, "springs in contact", "1", dtype="i8")
         text = h5py.string_dtype()
         f.create_variable("phase", ("step",), dtype=text, chunks=(256,))
@@ -121,8 +139,8 @@ class SnapshotWriter:
             + ", every_<k>"
         chunks = (1,) + tuple(f.dimensions[s].size for s in space)
         comp = dict(compression="gzip", compression_opts=4, shuffle=True, chunks=chunks)
-        self._var("F", ("step",) + space, None, "spring force (tension > 0)", "F*", dtype="f8", **comp)
-        self._var("u", ("step",) + space, None, "spring displacement u = C F (= d - x0 in contact)", "L*",
+        self._var("F", ("step",) + space, None, "spring force (tension > 0)", F_, dtype="f8", **comp)
+        self._var("u", ("step",) + space, None, "spring displacement u = C F (= d - x0 in contact)", L,
                   dtype="f8", **comp)
         v = self._var("state", ("step",) + space, None, "contact state", "1", dtype="i1", **comp)
         v.attrs["flag_values"] = np.array([STATE_NEVER, STATE_CONTACT, STATE_RELEASED], dtype=np.int8)
@@ -180,11 +198,11 @@ class SnapshotWriter:
         v = f.variables
         v["step"][i] = step
         v["d"][i] = rec["d"]
-        v["force"][i] = rec["force"]
+        v["force"][i] = rec["force"] * self.scale
         v["n_contact"][i] = rec["n_contact"]
         v["phase"][i] = rec["phase"]
         v["event"][i] = label
-        v["F"][i] = self._shape(F)
+        v["F"][i] = self._shape(F * self.scale if self.scale != 1.0 else F)
         v["u"][i] = self._shape(u)
         v["state"][i] = self._shape(state)
         self._index[step] = i
@@ -237,12 +255,14 @@ class Fields:
         self.params = json.loads(self.attrs["params"])
         self.steps = np.sort(self._steps)
         self._h5 = None
-        self.force_scale = 1.0
+        # the forces on file are F* times this (files written before it was recorded: F*)
+        self.file_scale = float(self.attrs.get("force_scale", 1.0))
+        self.force_scale = self.file_scale
 
     def use_force_scale(self, scale: float) -> None:
-        """Give forces (F, f_th, force) times ``scale`` from now on: the file holds paper
-        units, and an SI run's views show newtons (scale = tfm.units.force_scale(params)
-        of the run's own record; lengths keep their numbers, L* = 1 m)."""
+        """Give forces (F, f_th, force) in the units of a run whose force unit is
+        ``scale`` F* (tfm.units.force_scale of its record: newtons for an SI run; lengths
+        keep their numbers, L* = 1 m), whatever the file holds."""
         ratio = float(scale) / self.force_scale
         self.f_th = self.f_th * ratio
         self.force = self.force * ratio
@@ -267,8 +287,8 @@ class Fields:
 
             self._h5 = h5py.File(self.path, "r")
         out = {name: self._h5[name][i] for name in ("F", "u", "state")}
-        if self.force_scale != 1.0:
-            out["F"] = out["F"] * self.force_scale
+        if self.force_scale != self.file_scale:
+            out["F"] = out["F"] * (self.force_scale / self.file_scale)
         out.update(step=int(step), d=float(self.d[i]), force=float(self.force[i]),
                    n_contact=int(self.n_contact[i]), event=self.events[i])
         return out
