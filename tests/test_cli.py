@@ -96,6 +96,23 @@ def test_overwrite_replaces_and_the_plot_gets_its_own_path(tmp_path):
     assert not list(tmp_path.glob(".*"))
 
 
+def test_overwriting_a_table_removes_its_old_snapshots(tmp_path, capsys):
+    """A table replaced by a run without snapshots loses the snapshots it had: they belonged
+    to the old run, and tfm show drew them beside the new curve. Without --overwrite, a
+    snapshots file at the table's place is refused like the table itself."""
+    out = tmp_path / "c.parquet"
+    fields = tmp_path / "c.fields.nc"
+    assert main(["run", *SMALL, "--snapshots", "events", "-o", str(out), "--no-plot"]) == 0
+    assert read_metadata(out)["fields"] == fields.name and fields.exists()
+    assert main(["run", *SMALL[:-1], "--alpha", "0.5", "-o", str(out), "--no-plot", "--overwrite"]) == 0
+    assert "snapshots of the table being replaced, will be removed" in capsys.readouterr().err
+    assert not fields.exists() and "fields" not in read_metadata(out)
+    out.unlink()
+    fields.write_bytes(b"an orphan")
+    assert main(["run", *SMALL, "-o", str(out), "--no-plot"]) == 2
+    assert "snapshots: " in capsys.readouterr().err and fields.read_bytes() == b"an orphan"
+
+
 def test_default_output_is_named_by_run_id_so_runs_do_not_clobber(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     assert main(["run", *SMALL, "--no-plot"]) == 0

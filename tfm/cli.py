@@ -135,9 +135,14 @@ def check_output(path: Path, what: str, suffixes: tuple[str, ...], overwrite: bo
 def _plan_outputs(args, p: Params) -> tuple[Path, Path | None]:
     out = Path(args.output) if args.output else default_output(p)
     check_output(out, "output", (TABLE_SUFFIX,), args.overwrite, create=not args.output)
-    if p.snapshots != "none":             # the field snapshots stream beside the table
-        from .results import fields_path_for
-        check_output(fields_path_for(out), "snapshots", (".nc",), args.overwrite, create=False)
+    from .results import fields_path_for
+    fields = fields_path_for(out)
+    # the field snapshots stream beside the table; a run without them removes those of the
+    # table it replaces (write_curve)
+    check_output(fields, "snapshots", (".nc",), args.overwrite, create=False)
+    if p.snapshots == "none" and fields.exists() and not args.quiet:
+        print(f"tfm: note: --overwrite: {fields}, the snapshots of the table being replaced, will be removed",
+              file=sys.stderr)
     if args.no_plot:
         return out, None
     plot = Path(args.plot) if args.plot else out.with_suffix(".png")

@@ -91,7 +91,12 @@ class RunResult:
                 os.replace(tmp, dest)
                 self.fields_path = dest
             extra["fields"] = dest.name
-        return write_table(self.curve, path, self.params, self.provenance, self.summary, extra=extra)
+        written = write_table(self.curve, path, self.params, self.provenance, self.summary, extra=extra)
+        if self.fields_path is None:
+            # snapshots left beside the path by the table just replaced are not this run's
+            # (views would have drawn them with this curve)
+            fields_path_for(path).unlink(missing_ok=True)
+        return written
 
 
 def fields_path_for(curve_path: str | os.PathLike) -> Path:
