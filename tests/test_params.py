@@ -72,3 +72,28 @@ def test_params_are_frozen():
     p = Params()
     with pytest.raises(Exception):
         p.spacing = 0.1
+
+
+def test_none_is_no_value_for_optional_parameters_and_a_value_of_choices(tmp_path):
+    """"none" (TOML, the command line) means "no value" for an optional parameter, but it is
+    itself a value of preconditioner and threshold_disorder: it was turned into None there
+    too, and preconditioner = "none", a documented value, was refused by tfm run and by
+    campaigns ('unknown value None')."""
+    from tfm.campaign import select_runs, spec_from_dict
+    from tfm.cli import main
+    from tfm.results import read_metadata
+
+    p = Params.from_dict({"preconditioner": "none", "threshold_disorder": "None", "f_th": "none", "k_th": 0.02,
+                          "extent": "null"})
+    assert (p.preconditioner, p.threshold_disorder, p.f_th, p.extent) == ("none", "none", None, None)
+    with pytest.raises(ParameterError, match="radius: cannot read 'none' as a number"):
+        Params.from_dict({"radius": "none"})
+    spec = spec_from_dict({"name": "t", "base": {"spacing": "1/16", "k_th": 0.02, "preconditioner": "none",
+                                                  "step": 2e-3},
+                           "sweep": {"extent": [0.8, "none"]}})
+    assert [r.params.preconditioner for r in spec.runs] == ["none", "none"]
+    assert [r.params.extent for r in select_runs(spec, ["extent=none"])] == [None]
+    out = tmp_path / "c.parquet"
+    assert main(["run", "--spacing", "1/16", "--k-th", "0.02", "--step", "2e-3", "--preconditioner", "none",
+                 "--f-th", "None", "--no-plot", "-q", "-o", str(out)]) == 0
+    assert Params.from_dict(read_metadata(out)["params"]).preconditioner == "none"

@@ -84,7 +84,7 @@ def _params_from_args(args) -> Params:
         raw = getattr(args, name)
         if raw is None:
             continue
-        values[name] = None if raw.lower() in ("none", "null") else raw
+        values[name] = raw                # "none" is read by Params.from_dict (params.NONE_WORDS)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ParameterWarning)
         p = Params.from_dict(values)

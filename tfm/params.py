@@ -412,9 +412,18 @@ def parse_param(key: str, value: Any, where: str = "") -> Any:
     return _coerce(key, value, prefix)
 
 
+# Words read as "no value" for an optional parameter (f_th, extent, ...). Where "none" is
+# one of a choice's values (preconditioner, threshold_disorder), it stays that value.
+NONE_WORDS = ("none", "null")
+
+
 def _coerce(key: str, value: Any, prefix: str) -> Any:
     if key == "snapshots":
         return _coerce_snapshots(value, prefix)
+    if isinstance(value, str) and value.strip().lower() in NONE_WORDS:
+        if key in _OPTIONAL:
+            return None
+        value = "none"                   # a choice's own value, or refused below as not a number
     try:
         if value is None:
             return None

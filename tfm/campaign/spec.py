@@ -49,7 +49,6 @@ TOP_LEVEL_KEYS = ("name", "description", "max_runs", "base", "sweep", "zip")
 # default answers within seconds; a larger campaign must say it means it (max_runs = N).
 DEFAULT_MAX_RUNS = 10_000
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
-_NONE_WORDS = ("none", "null")
 
 
 class CampaignError(ParameterError):
@@ -201,9 +200,7 @@ def _expand(base, sweep, zips, where):
         swept: dict[str, Any] = {}
         for part in combo:
             swept.update(part)
-        values = {**base, **swept}
-        values = {k: (None if isinstance(v, str) and v.strip().lower() in _NONE_WORDS else v)
-                  for k, v in values.items()}
+        values = {**base, **swept}           # "none" is read by Params.from_dict (params.NONE_WORDS)
         label = f"{where}: run {index} {_label(swept)}".rstrip()
         try:
             with warnings.catch_warnings():
