@@ -87,3 +87,45 @@ def test_unit_response_solves_are_counted_once_per_contact_set(operator):
     assert np.all(x[state.contact] > 0) and np.all(x[~state.contact] == 0)
     again = state.unit_response(out)
     assert out.n_solves == solves + 1 and np.array_equal(x, again)
+
+
+def test_a_flat_punch_under_force_control_is_sized_and_reported_as_a_flat_punch():
+    """A flat punch's preload is Boussinesq's depth P / (2 E* R), not a sphere's Hertz depth
+    (0.0446 instead of 0.0126 for this load), the summary's max_indent is the depth the
+    peak load reached, and no preload note: a flat punch's pull-off does not depend on it.
+    The discrete punch is stiffer at the edge: its measured depth lies within 3 % of the
+    continuum's at this spacing (2.4 % measured)."""
+    from tfm.guards import check
+    from tfm.theory import E_STAR
+
+    p = Params(spacing=1 / 32, k_th=0.02, f_th=None, shape="flat_punch", radius=0.25, control="force", max_load=2e-3,
+               step=1e-4)
+    assert p.delta_max == pytest.approx(2e-3 / (2 * E_STAR * 0.25), rel=1e-14)
+    assert check(p) == []
+    # nor under displacement control with an automatic preload (it said "capped ... too shallow")
+    assert check(p.replace(control="displacement", max_load=None, max_indent="auto", step=1e-3)) == []
+    res = tfm.simulate(p)
+    s = res.summary
+    assert s["max_indent"] == res.curve["indent"].max()
+    assert s["max_indent"] == pytest.approx(p.delta_max, rel=0.03)
+    assert not s["warnings"]
+
+
+def test_the_step_guard_counts_load_steps_under_force_control():
+    """Under force control ``step`` is the first approach, not a loading step: 5 indent
+    steps to max_indent with 100 load steps ran before, refused ('only 5 loading steps')."""
+    from tfm.guards import check
+
+    p = Params(control="force", step=0.01, f_th=None, **STANDARD)
+    assert check(p) == []
+    with pytest.raises(ParameterError, match="step: only 5 loading steps"):
+        check(p.replace(control="displacement"))
+
+
+def test_force_control_on_a_height_map_is_refused(tmp_path):
+    """Its peak load was the Hertz load of a radius a height map does not have."""
+    m = tmp_path / "m.npy"
+    np.save(m, np.zeros((41, 41)))
+    with pytest.raises(ParameterError, match="control: 'force' is not available for shape='height_map'"):
+        Params(shape="height_map", height_map=str(m), spacing=1 / 32, f_th=0.0, alpha=0.0, control="force",
+               max_indent=0.01, step=1e-3)

@@ -174,9 +174,9 @@ class Params:
         Hertz load at ``delta_max``."""
         if self.max_load is not None:
             return float(self.max_load)
-        from .theory import hertz_force
+        from .theory import preload_force
         from .units import force_scale           # theory is in paper units (SI: L* = 1 m)
-        return float(hertz_force(self.delta_max, self.radius)) * force_scale(self)
+        return float(preload_force(self.shape, self.delta_max, self.radius)) * force_scale(self)
 
     @property
     def load_decrement(self) -> float:
@@ -186,13 +186,14 @@ class Params:
     @functools.cached_property           # a pure function of a frozen record
     def delta_max(self) -> float:
         """The preload depth, resolving ``max_indent="auto"`` (under force control with an
-        explicit max_load: the Hertz depth of that load, which sizes the grid)."""
+        explicit max_load: the non-adhesive depth of that load, Hertz or the flat punch's,
+        which sizes the grid)."""
         if self.max_indent == "auto" and self.units == "si":
             from .units import to_paper     # same lengths in paper units with L* = 1 m
             return to_paper(self).delta_max
         if self.max_indent == "auto" and getattr(self, "max_load", None) is not None:
-            from .theory import hertz_indent
-            return float(hertz_indent(self.max_load, self.radius))
+            from .theory import preload_indent
+            return float(preload_indent(self.shape, self.max_load, self.radius))
         if self.max_indent == "auto":
             from .theory import auto_max_indent
             return auto_max_indent(self)
@@ -591,6 +592,11 @@ def _validate_protocol(p: Params) -> None:
     elif p.shape == "flat_punch":
         raise ParameterError("max_load: control='force' on a flat punch needs an explicit max_load "
                              "(there is no Hertz load to derive it from)")
+    if p.shape == "height_map":
+        # its peak load would be a Hertz load of a radius that does not apply, and an
+        # explicit max_load has no closed-form depth to size the run
+        raise ParameterError("control: 'force' is not available for shape='height_map'; use "
+                             "control='displacement' with max_indent")
     if p.load_step is not None:
         _positive("load_step", p.load_step)
 

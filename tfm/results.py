@@ -147,7 +147,9 @@ def summarize(curve: pd.DataFrame, out, p: Params, n_springs: int, grid_side: in
         "pull_off_force": float(max(tension[k], 0.0)) if len(curve) else 0.0,
         "pull_off_indent": float(curve["indent"].iloc[k]) if len(curve) else math.nan,
         "pull_off_contact_radius": float(curve["contact_radius"].iloc[k]) if len(curve) else math.nan,
-        "max_indent": p.delta_max,
+        # force control: the depth the peak load reached (delta_max only sized the grid)
+        "max_indent": (float(curve["indent"].max()) if len(curve) else 0.0) if p.control == "force"
+        else p.delta_max,
         "f_th": p.threshold_force,
         "max_force": float(curve["force"].max()) if len(curve) else 0.0,
         "max_contact_radius": float(curve["contact_radius"].max()) if len(curve) else 0.0,

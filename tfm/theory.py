@@ -44,6 +44,19 @@ def flat_punch_force(delta, radius):
     return 2.0 * E_STAR * radius * np.clip(np.asarray(delta, dtype=float), 0.0, None)
 
 
+def preload_force(shape, delta, radius):
+    """The load that presses a smooth body of ``shape`` to ``delta`` without adhesion:
+    Boussinesq's flat punch, else Hertz (a sphere as its paraboloid)."""
+    return flat_punch_force(delta, radius) if shape == "flat_punch" else hertz_force(delta, radius)
+
+
+def preload_indent(shape, force, radius):
+    """The inverse of ``preload_force``: the depth of a non-adhesive body under ``force``."""
+    if shape == "flat_punch":
+        return np.clip(np.asarray(force, dtype=float), 0.0, None) / (2.0 * E_STAR * radius)
+    return hertz_indent(force, radius)
+
+
 def hertz_radius(delta, radius):
     delta = np.clip(np.asarray(delta, dtype=float), 0.0, None)
     return np.sqrt(radius * delta)
