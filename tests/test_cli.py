@@ -96,6 +96,13 @@ def test_overwrite_replaces_and_the_plot_gets_its_own_path(tmp_path):
     assert not list(tmp_path.glob(".*"))
 
 
+def test_plot_and_no_plot_together_are_refused(tmp_path, capsys):
+    """--plot was silently ignored beside --no-plot."""
+    assert main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "--no-plot", "--plot", str(tmp_path / "c.png")]) == 2
+    assert "plot: give --plot FILE or --no-plot, not both" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+
+
 def test_overwriting_a_table_removes_its_old_snapshots(tmp_path, capsys):
     """A table replaced by a run without snapshots loses the snapshots it had: they belonged
     to the old run, and tfm show drew them beside the new curve. Without --overwrite, a

@@ -144,6 +144,8 @@ def _plan_outputs(args, p: Params) -> tuple[Path, Path | None]:
         print(f"tfm: note: --overwrite: {fields}, the snapshots of the table being replaced, will be removed",
               file=sys.stderr)
     if args.no_plot:
+        if args.plot:
+            raise OutputError("plot: give --plot FILE or --no-plot, not both")
         return out, None
     plot = Path(args.plot) if args.plot else out.with_suffix(".png")
     if plot.resolve() == out.resolve():
