@@ -231,3 +231,18 @@ def test_allow_names_known_guards_only():
     assert Params.from_dict({"allow": ["tol", "step"]}).allow == "step,tol"
     with pytest.raises(ParameterError, match="allow: unknown value 'coars'.*did you mean 'coarse'"):
         Params(allow="coars")
+
+
+def test_a_run_that_touched_at_a_few_springs_only_is_flagged():
+    """The coarse guard's estimate assumes a smooth body; this rough one (rms height 10x
+    the indentation) touched at 3 springs and gave a pull-off of 2e-4 against 3.7e-3 when
+    smooth, unflagged. The run is now checked on the contact it reached."""
+    import tfm
+
+    kw = dict(spacing=1 / 32, k_th=0.02, f_th=None, shape="paraboloid", max_indent=0.05, step=2.5e-3,
+              rms_height=0.5, extent=0.5)
+    with pytest.warns(tfm.RunWarning, match="springs were in contact"):
+        res = tfm.simulate(**kw)
+    assert res.curve["n_contact"].max() < 4 * np.pi       # fewer than a disc of radius 2 spacings
+    assert "the pull-off is erratic" in res.summary["warnings"]
+    assert tfm.simulate(**kw, allow="coarse").summary["warnings"] == ""

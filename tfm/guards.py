@@ -140,6 +140,18 @@ def available_memory() -> float | None:
     return None
 
 
+def contact_reached_note(p, max_n_contact: int) -> str | None:
+    """After a run: the ``coarse`` guard on the contact the run reached (the estimate
+    before it assumes a smooth body: a rough one can touch at a few springs only). The
+    contact's equivalent radius sqrt(n / pi) spacings, against the same threshold."""
+    across = math.sqrt(max_n_contact / math.pi)
+    if across >= MIN_SPRINGS_ACROSS_RADIUS or "coarse" in _allowed(p):
+        return None
+    return (f"at most {max_n_contact} springs were in contact (as many as a disc of radius {across:.2g} "
+            f"spacings); below {MIN_SPRINGS_ACROSS_RADIUS:g} the pull-off is erratic: refine the spacing or "
+            "preload deeper (allow='coarse' accepts it)")
+
+
 def _allowed(p) -> set[str]:
     return set(filter(None, p.allow.split(",")))
 

@@ -136,6 +136,10 @@ def summarize(curve: pd.DataFrame, out, p: Params, n_springs: int, grid_side: in
         warnings.append(f"snap/enter rounds hit max_rounds={p.max_rounds} at {out.rounds_exceeded} steps")
     if not out.unload_complete:
         warnings.append("unloading stopped at max_unload_steps with springs still in contact")
+    from .guards import contact_reached_note
+    few = contact_reached_note(p, int(curve["n_contact"].max()) if len(curve) else 0)
+    if few:
+        warnings.append(few)
     first_snap = unload[unload["n_snapped"] > 0]
     # force control: the last load the contact held before it broke (tfm.protocol)
     held = unload[unload["n_contact"] > 0]
