@@ -23,10 +23,11 @@ import math
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tfm import Params, RunWarning, simulate, theory
-from tfm.analysis import fit_power_law, spacing_slope
+from tfm.analysis import convergence_ratios, convergent_alpha, fit_line, fit_power_law, spacing_slope
 from tfm.campaign import load_spec
 
 STEPS = 60            # loading steps per run: max_indent / step
@@ -50,6 +51,68 @@ def jkr_run(k_th: float, radius: float, spacing: str, max_indent: float | None =
     dmax = max_indent or deep_preload(k_th, radius)
     return pull_off(alpha=0.75, k_th=k_th, radius=radius, spacing=spacing, max_indent=dmax,
                     step=dmax / STEPS)
+
+
+# ---- the fits themselves, on exact data (milliseconds, no simulation) ---------------
+def test_fits_give_exact_data_back():
+    x = np.array([1 / 32, 1 / 64, 1 / 128])
+    # F ~ spacing^(4 alpha - 3) at alpha = 0: x8 per halving, exactly
+    fit = fit_power_law(x, 2.0 * x ** -3.0)
+    assert fit.exponent == pytest.approx(-3.0, abs=1e-12)
+    assert fit.prefactor == pytest.approx(2.0, rel=1e-12)
+    assert fit.r2 == pytest.approx(1.0, abs=1e-12)
+    ratios = convergence_ratios(x, x ** -3.0)
+    assert list(ratios["spacing_coarse"]) == [1 / 32, 1 / 64]
+    assert np.allclose(ratios["ratio"], 8.0, rtol=1e-12) and np.allclose(ratios["local_slope"], -3.0, rtol=1e-12)
+    line = fit_line([1.0, 2.0, 3.0], [1.0, 3.0, 5.0])
+    assert (line.slope, line.intercept) == pytest.approx((2.0, -1.0), abs=1e-12)
+    # the Boussinesq slopes 4 alpha - 3 cross zero at 0.75
+    zc = convergent_alpha([0.5, 0.75, 1.0], [-1.0, 0.0, 1.0])
+    assert zc.alpha == pytest.approx(0.75, abs=1e-12) and zc.gradient == pytest.approx(4.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("fit,args,match", [
+    (fit_power_law, ([1.0, 2.0, 3.0], [1.0, np.nan, 9.0]), "y must be finite"),
+    (fit_power_law, ([1.0, np.inf], [1.0, 2.0]), "x must be finite"),
+    (fit_power_law, ([1.0, 1.0], [1.0, 2.0]), "two distinct x"),
+    (fit_line, ([1.0], [2.0]), "at least two points"),
+    (fit_line, ([1.0, 1.0], [1.0, 2.0]), "two distinct x"),
+    (fit_line, ([1.0, 2.0], [1.0, np.nan]), "y must be finite"),
+    (convergent_alpha, ([0.5, 0.5], [-1.0, -0.5]), "two distinct alphas"),
+    (convergent_alpha, ([0.5, 0.5, 0.5], [-1.0, -0.5, 0.0]), "two distinct alphas"),
+    (convergent_alpha, ([0.5, 0.75, 1.0], [-1.0, -1.0, -1.0]), "do not change with alphas"),
+    # two seeds at 1/32: no ratio between them
+    (convergence_ratios, ([1 / 32, 1 / 32, 1 / 64], [1.0, 1.1, 1.2]), "spacing repeats: 1/32.*average"),
+    (convergence_ratios, ([1 / 32, 1 / 64], [1.0, 0.0]), "> 0"),
+])
+def test_fits_refuse_what_determines_no_answer(fit, args, match):
+    with pytest.raises(ValueError, match=match):
+        fit(*args)
+
+
+def test_convergent_alpha_without_a_significant_gradient_has_no_interval():
+    """Slopes that scatter around a flat line: d slope/d alpha = -0.1 with a t interval
+    far wider than that, so by Fieller's theorem the crossing (here at alpha = -9) has an
+    unbounded confidence set, not the delta method's finite one."""
+    zc = convergent_alpha([0.5, 0.75, 1.0], [-1.0, -0.9, -1.05])
+    assert zc.gradient == pytest.approx(-0.1)
+    assert (zc.ci_low, zc.ci_high) == (-math.inf, math.inf)
+
+
+def test_kernel_claim_does_not_agree_through_an_unbounded_interval():
+    """The paper claim for the Boussinesq kernel (alpha* = 0.75) from slopes with no
+    significant trend in alpha: the crossing's interval is infinite, so it holds 0.75
+    trivially; the claim must say "no", not "yes"."""
+    import pandas as pd
+    from types import SimpleNamespace
+    from tfm.paper.claims import claims_kernels
+
+    rows = [dict(p_kernel="boussinesq", p_alpha=a, p_spacing=h, r_pull_off_force=h ** slope, p_k_th=0.02,
+                 r_max_indent=0.1, r_f_th=0.02 * h ** (2 * a), p_radius=1.0, p_c_w=1.0)
+            for a, slope in [(0.5, -1.0), (0.75, -0.9), (1.0, -1.05)] for h in (1 / 32, 1 / 64)]
+    claim, = claims_kernels(SimpleNamespace(summary=pd.DataFrame(rows))).claims
+    assert "no CI" in claim.tfm
+    assert claim.agrees == "no"
 
 
 # ---- JKR scalings at fixed spacing (paper Fig. 6) ------------------------------------

@@ -97,11 +97,33 @@ def _t_quantile(dof: int, confidence: float) -> float:
     return float(stats.t.ppf(0.5 + confidence / 2.0, dof))
 
 
-def _clean(x, y):
+def _clean(x, y, who: str, names: tuple[str, str] = ("x", "y")):
+    """x and y as float arrays of one shape, every value finite: a NaN or inf would
+    otherwise pass the sign checks and come out as a NaN fit (with r2 = 1)."""
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
     if x.shape != y.shape:
-        raise ValueError(f"x and y must have the same shape, got {x.shape} and {y.shape}")
+        raise ValueError(f"{who}: {names[0]} and {names[1]} must have the same shape, got {x.shape} and {y.shape}")
+    for name, v in zip(names, (x, y)):
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            raise ValueError(f"{who}: {name} must be finite, got {v[bad[0]]} at index {bad[0]}")
+    return x, y
+
+
+def _two_distinct(x: np.ndarray, who: str, name: str = "x") -> None:
+    """Refuse x with fewer than two distinct values: a fitted slope needs two."""
+    if x.size < 2:
+        raise ValueError(f"{who}: need at least two points, got {x.size}")
+    if np.unique(x).size < 2:
+        raise ValueError(f"{who}: need at least two distinct {name}, all are {x[0]:g}")
+
+
+def _positive(x, y, who: str, names: tuple[str, str] = ("x", "y")):
+    """``_clean`` for a log-log fit: points with x <= 0 or y <= 0 have no logarithm."""
+    x, y = _clean(x, y, who, names)
+    if np.any(x <= 0) or np.any(y <= 0):
+        raise ValueError(f"{who}: {names[0]} and {names[1]} must be > 0 (log-log)")
     return x, y
 
 
@@ -110,16 +132,11 @@ def fit_power_law(x, y, confidence: float = CONFIDENCE) -> PowerLawFit:
 
     Points with x <= 0 or y <= 0 have no logarithm and are refused (drop them first,
     e.g. the k_th = 0 run of the paper's Fig. 6a)."""
-    x, y = _clean(x, y)
-    if np.any(x <= 0) or np.any(y <= 0):
-        raise ValueError("fit_power_law: x and y must be > 0 (log-log fit)")
+    x, y = _positive(x, y, "fit_power_law")
+    _two_distinct(x, "fit_power_law")
     n = x.size
-    if n < 2:
-        raise ValueError("fit_power_law: need at least two points")
     lx, ly = np.log(x), np.log(y)
     sxx = float(np.sum((lx - lx.mean()) ** 2))
-    if sxx == 0.0:
-        raise ValueError("fit_power_law: all x are equal")
     slope = float(np.sum((lx - lx.mean()) * (ly - ly.mean())) / sxx)
     inter = float(ly.mean() - slope * lx.mean())
     resid = ly - (inter + slope * lx)
@@ -136,16 +153,22 @@ def fit_power_law(x, y, confidence: float = CONFIDENCE) -> PowerLawFit:
 
 
 def fit_line(x, y, through_origin: bool = False, confidence: float = CONFIDENCE) -> LineFit:
-    """OLS straight line with a Student-t interval on the slope."""
-    x, y = _clean(x, y)
+    """OLS straight line with a Student-t interval on the slope.
+
+    A free line needs two distinct x, one through the origin one x != 0; with exactly
+    that many the line is determined and its interval is infinite."""
+    x, y = _clean(x, y, "fit_line")
     n = x.size
     if through_origin:
+        if not np.any(x != 0):
+            raise ValueError(f"fit_line: a line through the origin needs an x != 0, got {n} points at x = 0")
         sxx = float(np.sum(x * x))
         slope = float(np.sum(x * y) / sxx)
         inter = 0.0
         dof = n - 1
         resid = y - slope * x
     else:
+        _two_distinct(x, "fit_line")
         sxx = float(np.sum((x - x.mean()) ** 2))
         slope = float(np.sum((x - x.mean()) * (y - y.mean())) / sxx)
         inter = float(y.mean() - slope * x.mean())
@@ -165,9 +188,16 @@ def convergence_ratios(spacing, values) -> pd.DataFrame:
     """Successive refinement ratios: F(finer)/F(coarser) and the local slope between them.
 
     Rows are sorted from the coarsest spacing to the finest. ``local_slope`` is
-    ln(F_i+1 / F_i) / ln(spacing_i+1 / spacing_i), the two-point estimate of the exponent."""
-    s = np.asarray(spacing, dtype=float)
-    v = np.asarray(values, dtype=float)
+    ln(F_i+1 / F_i) / ln(spacing_i+1 / spacing_i), the two-point estimate of the exponent.
+    One value per spacing: several runs at one spacing (seeds) have no ratio between
+    them, and which of them to pair with the next spacing is the caller's choice, so
+    they are refused; average them first (e.g. ``groupby(spacing).mean()``)."""
+    s, v = _positive(spacing, values, "convergence_ratios", ("spacing", "values"))
+    uniq, counts = np.unique(s, return_counts=True)
+    if np.any(counts > 1):
+        dup = ", ".join(f"{fraction_text(x)} ({c} values)" for x, c in zip(uniq, counts) if c > 1)
+        raise ValueError(f"convergence_ratios: spacing repeats: {dup}; average the runs at one spacing "
+                         "(e.g. over seeds) first")
     order = np.argsort(-s)
     s, v = s[order], v[order]
     rows = []
@@ -199,28 +229,35 @@ def convergent_alpha(alphas, slopes, confidence: float = CONFIDENCE) -> ZeroCros
     Fits slope = a + b alpha by OLS over the measured spacing slopes and returns
     alpha* = -a/b. Its standard error comes from the fit's covariance by the delta
     method, var(alpha*) = (var a + alpha*^2 var b + 2 alpha* cov ab) / b^2, and the
-    interval uses Student-t on n - 2 degrees of freedom."""
-    a_ = np.asarray(alphas, dtype=float)
-    s_ = np.asarray(slopes, dtype=float)
+    interval uses Student-t on n - 2 degrees of freedom.
+
+    Needs two distinct alphas (slopes at one alpha say nothing about d slope/d alpha).
+    A slope that does not change with alpha (b zero to rounding) has no crossing and is
+    refused. If b is not significantly nonzero (its own interval contains 0), the
+    crossing's confidence set is unbounded (Fieller's theorem) and the interval is
+    returned as (-inf, inf), where the delta method would give a finite but meaningless one."""
+    a_, s_ = _clean(alphas, slopes, "convergent_alpha", ("alphas", "slopes"))
+    _two_distinct(a_, "convergent_alpha", "alphas")
     n = a_.size
-    if n < 2:
-        raise ValueError("convergent_alpha: need slopes at two alphas at least")
     X = np.column_stack([np.ones(n), a_])
     coef, *_ = np.linalg.lstsq(X, s_, rcond=None)
     a, b = float(coef[0]), float(coef[1])
-    if b == 0:
-        raise ValueError("convergent_alpha: the slope does not change with alpha")
+    # the fitted change of slope over the alphas, against rounding of the slopes
+    if abs(b) * float(np.ptp(a_)) <= 1e-12 * float(np.max(np.abs(s_))):
+        raise ValueError(f"convergent_alpha: the slopes do not change with alphas (d slope/d alpha = {b:.3g}): "
+                         "no zero crossing")
     root = -a / b
     dof = n - 2
+    se = half = math.inf
     if dof > 0:
         resid = s_ - X @ coef
         s2 = float(resid @ resid) / dof
         cov = s2 * np.linalg.inv(X.T @ X)
-        var = (cov[0, 0] + root ** 2 * cov[1, 1] + 2 * root * cov[0, 1]) / b ** 2
-        se = math.sqrt(max(var, 0.0))
-        half = _t_quantile(dof, confidence) * se
-    else:
-        se = half = math.inf
+        t = _t_quantile(dof, confidence)
+        if abs(b) > t * math.sqrt(cov[1, 1]):
+            var = (cov[0, 0] + root ** 2 * cov[1, 1] + 2 * root * cov[0, 1]) / b ** 2
+            se = math.sqrt(max(var, 0.0))
+            half = t * se
     return ZeroCrossing(root, se, root - half, root + half, a, b, n, confidence)
 
 
@@ -366,9 +403,9 @@ def fit_limit(x, y, confidence: float = CONFIDENCE, p_bounds: tuple[float, float
     solved exactly; the best p minimises the residual sum of squares. The interval of
     y_inf is its extent over the confidence set (see ``LimitFit``), that of p the grid
     points whose best RSS is under the threshold. Needs at least four points."""
-    x, y = _clean(x, y)
-    if np.any(~np.isfinite(x)) or np.any(~np.isfinite(y)) or np.any(x <= 0):
-        raise ValueError("fit_limit: x must be finite and > 0, y finite")
+    x, y = _clean(x, y, "fit_limit")
+    if np.any(x <= 0):
+        raise ValueError("fit_limit: x must be > 0")
     n = x.size
     if n < 4:
         raise ValueError(f"fit_limit: three free parameters need at least four points, got {n}")
@@ -484,7 +521,7 @@ def plateau(x, y, confidence: float = CONFIDENCE) -> Plateau:
     Where the limit fit cannot find a trend (its p interval open), this is the estimate
     that assumes none is left: it is only as good as that assumption, and says so by its
     width (the scatter of the points, e.g. the staircase of the discrete contact edge)."""
-    x, y = _clean(x, y)
+    x, y = _clean(x, y, "plateau")
     x_min = float(x.max()) / 2.0 ** PLATEAU_OCTAVES
     keep = x >= x_min * (1 - 1e-12)
     sel = y[keep]
