@@ -115,6 +115,57 @@ def test_kernel_claim_does_not_agree_through_an_unbounded_interval():
     assert claim.agrees == "no"
 
 
+def fig3_run(offset: float, excess: float):
+    """A Fig. 3 run object with a Hertz-like curve: loading P = d^1.5 at d = 0.001 ..
+    0.05, unloading along its tangent at the top (the fixed-contact stiffness), plus
+    ``excess``, at indentations shifted by ``offset`` loading steps (0: displacement
+    control, where the steps coincide; 0.5: none coincide, as under force control)."""
+    import pandas as pd
+    from types import SimpleNamespace
+
+    h, top = 1e-3, 0.05
+    load = np.arange(1, 51) * h
+    unload = top - (np.arange(1, 71) - offset) * h
+    f_unload = top ** 1.5 + 1.5 * top ** 0.5 * (unload - top) + excess
+    n = load.size + unload.size
+    curve = pd.DataFrame({"step": np.arange(n), "phase": ["load"] * load.size + ["unload"] * unload.size,
+                          "indent": np.concatenate([load, unload]),
+                          "force": np.concatenate([load ** 1.5, f_unload]),
+                          "n_contact": 100, "n_snapped": np.r_[np.zeros(load.size + 10), np.ones(unload.size - 10)],
+                          "contact_radius": 0.1})
+    summary = pd.DataFrame([dict(p_spacing=1 / 32, r_f_th=2e-5, p_radius=1.0, r_max_indent=top,
+                                 r_pull_off_force=-f_unload.min())])
+    return SimpleNamespace(summary=summary, curves=curve)
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.5])
+def test_fig3_claim_compares_the_branches_at_every_unloading_indentation(offset):
+    from tfm.paper.claims import claims_fig3
+
+    def claim(excess):
+        return claims_fig3(fig3_run(offset, excess)).claims[0]
+
+    # the tangent lies below the convex loading curve: the claim holds, at all 49
+    # unloading steps inside the loading range [0.001, 0.05), not only at shared ones
+    ok = claim(0.0)
+    assert ok.agrees == "yes" and "at the 49 unloading steps" in ok.tfm
+    # 2e-4 above the tangent crosses the loading curve (their gap is 3/8 d^-0.5 (0.05 - d)^2,
+    # below 2e-4 within about 0.01 of the top): the claim must fail, whether or not steps coincide
+    assert claim(2e-4).agrees == "no"
+
+
+def test_fig3_claim_with_nothing_to_compare_is_not_true():
+    from tfm.paper.claims import claims_fig3, unloading_below_loading
+
+    run = fig3_run(0.0, 0.0)
+    c = run.curves
+    # the unloading steps moved above the loading range: no indentation to compare at
+    c.loc[c.phase == "unload", "indent"] += 1.0
+    assert unloading_below_loading(c) == (False, 0)
+    claim = claims_fig3(run).claims[0]
+    assert claim.agrees == "no" and "not tested" in claim.tfm
+
+
 # ---- JKR scalings at fixed spacing (paper Fig. 6) ------------------------------------
 @pytest.fixture(scope="module")
 def k_series():
