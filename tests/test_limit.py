@@ -288,3 +288,33 @@ def test_the_report_stability_table_is_the_leave_one_out_refit():
         assert st["y_inf_min"] == min(f.y_inf for f in parts) and st["y_inf_max"] == max(f.y_inf for f in parts)
         checked.append(res.self_term)
     assert len(checked) == 3          # every self term of the campaign has a fit to check
+
+
+def test_limit_figure_legends_are_outside_the_axes(tmp_path, monkeypatch):
+    """The figure of the committed points: each panel's legend lies outside its axes,
+    so it covers no data point whatever the data (inside, "best" put the punch panel's
+    legend on its Δ/a = 0.1 points, no corner being free in both panels)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from tfm.paper.limit import LIMIT_CAMPAIGNS, POINTS_FILE, fit_all, kept_points, plot_limit
+    from tfm.paper.run import load_spec_for
+
+    specs = {g: load_spec_for(stem) for g, stem in LIMIT_CAMPAIGNS}
+    points = kept_points(REPO / "results" / "limit" / POINTS_FILE, specs)
+    figures = []
+    monkeypatch.setattr(plt, "close", figures.append)      # keep the figure plot_limit closes
+    plot_limit(fit_all(points), tmp_path / "limit.png")
+    monkeypatch.undo()
+    fig, = figures
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    assert len(fig.axes) == 2
+    for ax in fig.axes:
+        legend, frame = ax.get_legend().get_window_extent(renderer), ax.get_window_extent(renderer)
+        assert not legend.overlaps(frame), ax.get_title()
+        # and inside the figure: not cut off by the saved image's edge
+        assert fig.bbox.contains(legend.x0, legend.y0) and fig.bbox.contains(legend.x1, legend.y1)
+    plt.close(fig)

@@ -271,7 +271,9 @@ def plot_limit(results: list[LimitResult], path: Path) -> None:
         ax.set_xlabel("Δ/a" + ("_c (JKR critical radius)" if geometry == "paraboloid" else " (punch radius)"))
         ax.set_ylabel(Y_LABEL[geometry])
         ax.set_title(f"{geometry}: y∞ + C (a/Δ)^-p (solid) or plateau (dashed), 95 %", fontsize=9)
-        ax.legend(fontsize=7)
+        # below the axes: inside, any corner covers points of some panel (the punch's
+        # upper right held its Δ/a = 0.1 points)
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3, frameon=False)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
