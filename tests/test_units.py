@@ -180,3 +180,25 @@ def test_limit_coefficient_is_the_measured_limit_and_is_stored_as_a_number():
         assert p.run_id == p.replace(k_th_coefficient=c).run_id
     assert Params.from_dict({**SI, "spacing": R / 32, "step": R * 1e-3,
                              "k_th_coefficient": "limit"}).k_th_coefficient == LIMIT_COEFFICIENTS[3.8]
+
+
+def test_every_dimensioned_column_has_a_unit():
+    """The table metadata's units.columns covers what a run writes, derived from a run
+    rather than a list: every float curve column and float summary value has a
+    dimension (length, force, area, time), except the solver's relative residual; the
+    integer ones are counts. Each dimension has a unit in every system."""
+    from tfm.units import COLUMN_UNITS
+
+    p = Params.from_dict(dict(spacing="1/16", step=2e-3, shape="paraboloid", max_indent=0.02, k_th=0.02,
+                              control="force"))
+    res = tfm.simulate(p)
+    curve = [c for c in res.curve.columns if res.curve[c].dtype.kind == "f"]
+    summary = [k for k, v in res.summary.items() if isinstance(v, float)]
+    assert {"force", "indent"} <= set(curve) and {"jump_off_force", "pull_off_force"} <= set(summary)
+    columns = COLUMN_UNITS["paper"]["columns"]
+    assert [k for k in curve + summary if k not in columns and k != "max_residual"] == []
+    for system in COLUMN_UNITS.values():
+        assert system["columns"] == columns
+        assert set(columns.values()) <= set(system)
+    # under force control the jump-off values are measured (not nan), so they need the unit
+    assert math.isfinite(res.summary["jump_off_force"]) and math.isfinite(res.summary["jump_off_indent"])

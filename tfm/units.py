@@ -58,18 +58,24 @@ def limit_coefficient(self_term: float) -> float:
 #: L* of an SI run, in metres
 LENGTH_SCALE_SI = 1.0
 
-#: units of the curve and summary columns, per unit system
+#: units of the curve and summary columns, per unit system. Every curve column and
+#: summary value that carries a dimension is listed (tests/test_units.py derives the
+#: columns from a run); counts and relative quantities (max_residual) have none. An SI
+#: run's "force" columns are those scaled to newtons (``to_si_curve``, ``to_si_summary``).
 COLUMN_UNITS = {
-    "paper": {"length": "L* (paper units)", "force": "F* = 2 pi G L*^2/(1 - nu)", "area": "L*^2",
+    "paper": {"length": "L* (paper units)", "force": "F* = 2 pi G L*^2/(1 - nu)", "area": "L*^2", "time": "s",
               "columns": {"d": "length", "indent": "length", "force": "force",
                           "contact_area": "area", "contact_radius": "length",
                           "pull_off_force": "force", "pull_off_indent": "length",
                           "pull_off_contact_radius": "length", "max_indent": "length",
+                          "jump_off_force": "force", "jump_off_indent": "length",
+                          "jump_off_contact_radius": "length",
                           "f_th": "force", "max_force": "force", "max_contact_radius": "length",
-                          "first_snap_indent": "length", "half_width": "length"}},
-    "si": {"length": "m", "force": "N", "area": "m^2"},
+                          "first_snap_indent": "length", "half_width": "length", "wall_time": "time"}},
+    "si": {"length": "m", "force": "N", "area": "m^2", "time": "s"},
 }
 COLUMN_UNITS["si"]["columns"] = COLUMN_UNITS["paper"]["columns"]
+FORCE_COLUMNS = tuple(k for k, dim in COLUMN_UNITS["paper"]["columns"].items() if dim == "force")
 
 
 def resolve_coefficient(value) -> float:
@@ -141,19 +147,25 @@ def to_paper(p):
     return dataclasses.replace(p, **changes)
 
 
+def _forces_to_si(table, p):
+    """A copy of the paper twin's curve (DataFrame) or summary (dict) with its force
+    columns in newtons; lengths and areas keep their numbers (L* = 1 m)."""
+    out = table.copy()
+    F = force_scale(p)
+    for key in FORCE_COLUMNS:
+        if key in out:
+            out[key] = out[key] * F
+    return out
+
+
 def to_si_curve(curve, p):
     """Scale a paper-units curve (L* = 1 m) of the twin of SI record ``p`` to SI."""
-    out = curve.copy()
-    out["force"] = out["force"] * force_scale(p)
-    return out
+    return _forces_to_si(curve, p)
 
 
 def to_si_summary(summary: dict, p) -> dict:
-    out = dict(summary)
-    F = force_scale(p)
-    for key in ("pull_off_force", "max_force", "f_th", "jump_off_force"):
-        out[key] = out[key] * F
-    return out
+    """Scale the summary of the twin of SI record ``p`` to SI."""
+    return _forces_to_si(summary, p)
 
 
 def unit_labels(p) -> dict:
