@@ -151,7 +151,16 @@ def stored_run(tmp_path_factory):
     return out
 
 
-def test_the_views_of_an_si_run_show_its_snapshots_in_newtons(tmp_path):
+@pytest.fixture(scope="module")
+def si_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("si") / "si.parquet"
+    assert main(["run", "--units", "si", "--youngs-modulus", "1e6", "--poisson-ratio", "0.5",
+                 "--work-of-adhesion", "0.05", "--radius", "1e-3", "--shape", "paraboloid", "--spacing", "1e-5",
+                 "--step", "5e-7", "--snapshots", "events", "-q", "--no-plot", "-o", str(out)]) == 0
+    return out
+
+
+def test_the_views_of_an_si_run_show_its_snapshots_in_newtons(si_run):
     """Snapshots are stored in paper units; the views of an SI run scale their forces by F*
     (they showed the marker at P = -7e-11 beside a curve in newtons, and F_th likewise).
     Against the SI curve table and the SI record: the same P at every stored step, to
@@ -159,10 +168,7 @@ def test_the_views_of_an_si_run_show_its_snapshots_in_newtons(tmp_path):
     from tfm.units import force_scale
     from tfm.viewcli import _need_fields, load_run
 
-    out = tmp_path / "si.parquet"
-    assert main(["run", "--units", "si", "--youngs-modulus", "1e6", "--poisson-ratio", "0.5",
-                 "--work-of-adhesion", "0.05", "--radius", "1e-3", "--shape", "paraboloid", "--spacing", "1e-5",
-                 "--step", "5e-7", "--snapshots", "events", "-q", "--no-plot", "-o", str(out)]) == 0
+    out = si_run
     curve, params, fpath = load_run(out)
     fields = _need_fields(out, fpath, params)
     assert force_scale(params) > 1e6                                  # F* in newtons: far from 1
@@ -209,3 +215,53 @@ def test_show_without_snapshots_says_how_to_get_them(tmp_path, capsys):
     tfm.simulate(spacing=1 / 16, step=2e-3, **STANDARD).write_curve(out)
     assert main(["show", str(out)]) == 2
     assert "--snapshots events" in capsys.readouterr().err
+
+
+# ---- views refuse what is not one run's curve with its own snapshots ---------------------
+TINY = ["--spacing", "1/16", "--step", "2e-3", "--k-th", "0.02", "--shape", "paraboloid",
+        "--max-indent", "0.05", "-q", "--no-plot"]
+
+
+def _set_fields_run_id(path, run_id):
+    import h5py
+
+    with h5py.File(path, "r+") as f:
+        f.attrs["run_id"] = run_id
+
+
+def test_show_and_animate_refuse_the_snapshots_of_another_run(tmp_path, capsys):
+    """A fields file left beside a table by an earlier run (a rerun to the same -o without
+    snapshots) was drawn with the new curve. The views compare the run ids."""
+    from tfm.results import read_metadata
+
+    old, new = tmp_path / "old.parquet", tmp_path / "new.parquet"
+    assert main(["run", *TINY, "--snapshots", "events", "-o", str(old)]) == 0
+    assert main(["run", *TINY, "--radius", "2", "-o", str(new)]) == 0
+    stale = new.with_name("new.fields.nc")
+    stale.write_bytes(old.with_name("old.fields.nc").read_bytes())
+    old_id, new_id = read_metadata(old)["run_id"], read_metadata(new)["run_id"]
+    for argv in (["show", str(new)], ["animate", str(new), "-o", str(tmp_path / "a.gif")]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert old_id in err and new_id in err and str(stale) in err
+    assert not list(tmp_path.glob("*.png")) and not (tmp_path / "a.gif").exists()
+    assert main(["show", str(old), "-o", str(tmp_path / "own.png")]) == 0      # its own snapshots: drawn
+
+
+def test_an_si_runs_snapshots_are_its_own_under_either_run_id(si_run, tmp_path):
+    """The fields file of an SI run holds the paper-units twin's run id today (the SI run's
+    own once the writer records it): both are the run's; any other is refused."""
+    from tfm.units import to_paper
+    from tfm.viewcli import ViewError, _need_fields, load_run
+
+    out = tmp_path / "si.parquet"
+    out.write_bytes(si_run.read_bytes())
+    fields = out.with_name("si.fields.nc")
+    fields.write_bytes(si_run.with_name("si.fields.nc").read_bytes())
+    curve, params, fpath = load_run(out)
+    for run_id in (to_paper(params).run_id, params.run_id):
+        _set_fields_run_id(fields, run_id)
+        assert _need_fields(out, fpath, params).attrs["run_id"] == run_id
+    _set_fields_run_id(fields, "0123456789abcdef")
+    with pytest.raises(ViewError, match="0123456789abcdef"):
+        _need_fields(out, fpath, params)

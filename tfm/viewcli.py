@@ -92,10 +92,23 @@ def _need_fields(path, fields, params):
     if fields is None:
         raise ViewError(f"{path}: the run stored no field snapshots; rerun it with --snapshots events "
                         "(or --snapshots K for every K-th step)")
+    from .results import read_metadata
     from .snapshots import Fields
-    from .units import force_scale
+    from .units import force_scale, to_paper
 
     out = Fields(fields)
+    # Another run's snapshots left beside the table (a rerun to the same -o without any)
+    # would be drawn with this curve. An SI run's file may hold its paper-units twin's
+    # run id (tfm.units.to_paper) until the writer records the SI run's own: accept both.
+    table_id = read_metadata(path).get("run_id")
+    ours = {table_id} | ({params.run_id, to_paper(params).run_id} if params is not None else set())
+    ours.discard(None)
+    theirs = out.attrs.get("run_id")
+    theirs = theirs.decode() if isinstance(theirs, bytes) else theirs
+    if ours and theirs not in ours:
+        held = f"the snapshots of run {theirs}" if theirs else "snapshots of no recorded run"
+        raise ViewError(f"{fields} holds {held}, not of run {table_id or params.run_id} in {path}: "
+                        "stale, from an earlier run; rerun this one with --snapshots events")
     if params is not None:
         out.use_force_scale(force_scale(params))      # paper units on file; an SI curve is in N
     return out
