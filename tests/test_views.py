@@ -265,3 +265,24 @@ def test_an_si_runs_snapshots_are_its_own_under_either_run_id(si_run, tmp_path):
     _set_fields_run_id(fields, "0123456789abcdef")
     with pytest.raises(ViewError, match="0123456789abcdef"):
         _need_fields(out, fpath, params)
+
+
+def test_views_refuse_a_campaigns_joined_curves_and_its_summary(tmp_path, capsys):
+    """A campaign's curves.parquet (all runs, a run_id column) was drawn as one line through
+    every run with exit 0, and its summary.parquet raised KeyError: 'phase'. Both are refused
+    with the per-run tables (runs/<run_id>.parquet) named instead."""
+    from tfm.results import write_table
+
+    res = tmp_path / "smoke"
+    curve = tfm.simulate(spacing=1 / 16, step=2e-3, **STANDARD).curve
+    joined = pd.concat([curve.assign(run_id=rid) for rid in ("aaaaaaaaaaaaaaaa", "bbbbbbbbbbbbbbbb")])
+    write_table(joined[["run_id", *curve.columns]], res / "curves.parquet", extra={"campaign": {"name": "smoke"}})
+    write_table(pd.DataFrame({"run_id": ["aaaaaaaaaaaaaaaa", "bbbbbbbbbbbbbbbb"], "status": "done"}),
+                res / "summary.parquet", extra={"campaign": {"name": "smoke"}})
+    (res / "runs").mkdir()
+    for name, says in (("curves", "holds the curves of 2 runs"), ("summary", "without the curve columns")):
+        out = tmp_path / f"{name}.png"
+        assert main(["plot", str(res / f"{name}.parquet"), "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert says in err and f"{res / 'runs'}/<run_id>.parquet" in err and "Traceback" not in err
+        assert not out.exists()

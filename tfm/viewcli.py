@@ -69,8 +69,13 @@ def resolve_run(arg: str, results_dir: str | Path = "results") -> Path:
     raise ViewError(f"{arg}: no such curve table, folder or run id (under {results_dir}/*/runs/)")
 
 
+# what the views draw from a curve table
+VIEW_COLUMNS = ("step", "phase", "indent", "force", "contact_radius", "n_contact")
+
+
 def load_run(path: Path):
-    """The curve, the parameter record (None if it cannot be rebuilt) and the fields path."""
+    """The curve, the parameter record (None if it cannot be rebuilt) and the fields path.
+    Refuses a file that is not one run's curve table (ViewError)."""
     import pandas as pd
 
     from .params import ParameterError, Params
@@ -78,6 +83,7 @@ def load_run(path: Path):
 
     curve = pd.read_parquet(path)
     meta = read_metadata(path)
+    _check_one_curve(path, curve, meta)
     try:
         with warnings.catch_warnings():          # a stored record is complete and was valid
             warnings.simplefilter("ignore")
@@ -86,6 +92,21 @@ def load_run(path: Path):
         params = None            # stored by another tfm version: draw without the caption
     fields = path.parent / meta["fields"] if meta.get("fields") else fields_path_for(path)
     return curve, params, (fields if fields.exists() else None)
+
+
+def _check_one_curve(path: Path, curve, meta: dict) -> None:
+    """A campaign's joined curves (a run_id column) and its summary hold no single curve:
+    drawn as one they made one line through all runs, or a KeyError."""
+    runs = path.parent / "runs"
+    where = (f"one run's table, {runs}/<run_id>.parquet, or its run id"
+             if runs.is_dir() else "one run's curve table (a campaign keeps them in runs/<run_id>.parquet)")
+    missing = [c for c in VIEW_COLUMNS if c not in curve.columns]
+    if missing:
+        kind = "a campaign's table" if "campaign" in meta else "a table"
+        raise ViewError(f"{path} is {kind} without the curve columns {', '.join(missing)}; give {where}")
+    if "run_id" in curve.columns and curve["run_id"].nunique() > 1:
+        raise ViewError(f"{path} holds the curves of {curve['run_id'].nunique()} runs (a campaign's "
+                        f"curves table); give {where}")
 
 
 def _need_fields(path, fields, params):
