@@ -286,3 +286,36 @@ def test_views_refuse_a_campaigns_joined_curves_and_its_summary(tmp_path, capsys
         err = capsys.readouterr().err
         assert says in err and f"{res / 'runs'}/<run_id>.parquet" in err and "Traceback" not in err
         assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["plot", "{run}", "-o", "{tmp}/x.txt"], "x.txt must end with .png or .pdf or .svg"),
+    (["show", "{run}", "-o", "{tmp}/x.jpg"], "x.jpg must end with .png or .pdf or .svg"),
+    (["animate", "{run}", "-o", "{tmp}/x.webm"], "x.webm must end with .gif or .mp4"),
+    (["animate", "{run}", "-o", "{tmp}/x.gif", "--fps", "0"], "--fps 0: expected 0 < fps <= 100 for a GIF"),
+    (["animate", "{run}", "-o", "{tmp}/x.gif", "--fps", "-3"], "--fps -3: expected 0 < fps <= 100"),
+    (["animate", "{run}", "-o", "{tmp}/x.gif", "--fps", "500"], "--fps 500: expected 0 < fps <= 100"),
+    (["animate", "{run}", "-o", "{tmp}/x.mp4", "--fps", "nan"], "--fps nan: expected a finite fps > 0"),
+    (["plot", "{tmp}/garbage.parquet", "-o", "{tmp}/x.png"], "garbage.parquet: not a readable Parquet table"),
+    (["show", "{tmp}/garbage.parquet", "-o", "{tmp}/x.png"], "garbage.parquet: not a readable Parquet table"),
+])
+def test_bad_view_arguments_exit_2_before_drawing(stored_run, tmp_path, capsys, argv, message):
+    """An output suffix no writer takes, an fps the GIF cannot store (int(1000 / fps) ms in
+    whole centiseconds is 0 above 100 fps; 0 divided by zero) and a file that is not Parquet
+    were tracebacks, some after the drawing."""
+    (tmp_path / "garbage.parquet").write_bytes(b"not a parquet file\n" * 10)
+    argv = [a.format(run=stored_run, tmp=tmp_path) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["garbage.parquet"]      # nothing drawn
+
+
+def test_the_fps_range_is_what_a_gif_can_store():
+    from tfm.viewcli import GIF_MAX_FPS, ViewError, check_fps
+
+    check_fps(GIF_MAX_FPS, "a.gif")
+    assert int(int(1000 / GIF_MAX_FPS) / 10) >= 1          # Pillow's centiseconds at the limit
+    with pytest.raises(ViewError):
+        check_fps(GIF_MAX_FPS * 1.01, "a.gif")
+    check_fps(120, "a.mp4")                                  # MP4 stores the rate itself

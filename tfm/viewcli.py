@@ -43,7 +43,7 @@ def register(sub) -> None:
                                       "on the curve. Needs a run with snapshots = k (every k-th step).")
     anim.add_argument("run", help="curve .parquet, a folder with one, or a campaign run id")
     anim.add_argument("-o", "--output", help="a .gif (Pillow) or .mp4 (needs ffmpeg); default <stem>.gif")
-    anim.add_argument("--fps", type=float, default=8.0, help="frames per second (default 8)")
+    anim.add_argument("--fps", type=float, default=8.0, help="frames per second (default 8; at most 100 for a GIF)")
     anim.add_argument("--all-phases", action="store_true", help="loading too, not only the unloading")
     anim.set_defaults(func=cmd_animate)
 
@@ -77,12 +77,18 @@ def load_run(path: Path):
     """The curve, the parameter record (None if it cannot be rebuilt) and the fields path.
     Refuses a file that is not one run's curve table (ViewError)."""
     import pandas as pd
+    import pyarrow
 
     from .params import ParameterError, Params
     from .results import fields_path_for, read_metadata
 
-    curve = pd.read_parquet(path)
-    meta = read_metadata(path)
+    try:
+        curve = pd.read_parquet(path)
+        meta = read_metadata(path)
+    except (pyarrow.ArrowException, OSError) as exc:
+        why = getattr(exc, "strerror", None) or "corrupt, truncated or another format"
+        raise ViewError(f"{path}: not a readable Parquet table ({why}); give a curve table "
+                        "written by tfm run or by a campaign") from None
     _check_one_curve(path, curve, meta)
     try:
         with warnings.catch_warnings():          # a stored record is complete and was valid
@@ -117,7 +123,10 @@ def _need_fields(path, fields, params):
     from .snapshots import Fields
     from .units import force_scale, to_paper
 
-    out = Fields(fields)
+    try:
+        out = Fields(fields)
+    except (OSError, KeyError) as exc:
+        raise ViewError(f"{fields}: not a readable field snapshots file ({exc})") from None
     # Another run's snapshots left beside the table (a rerun to the same -o without any)
     # would be drawn with this curve. An SI run's file may hold its paper-units twin's
     # run id (tfm.units.to_paper) until the writer records the SI run's own: accept both.
@@ -174,31 +183,48 @@ def _guard(fn, args) -> int:
     return 0
 
 
+def _output(args, default: Path, suffixes: tuple[str, ...]) -> Path:
+    """-o (or the default beside the run) checked before anything is drawn: a suffix that
+    no writer takes failed after the drawing, with a traceback."""
+    from .cli import OutputError, check_output
+
+    out = Path(args.output) if args.output else default
+    try:
+        check_output(out, "-o", suffixes, overwrite=True, create=True)
+    except OutputError as exc:
+        raise ViewError(str(exc)) from None
+    return out
+
+
 def _plot(args) -> Path:
+    from .cli import PLOT_SUFFIXES
     from .plots import write_curve_figure
 
     path = resolve_run(args.run)
+    out = _output(args, path.with_suffix(".png"), PLOT_SUFFIXES)
     curve, params, _ = load_run(path)
-    return write_curve_figure(curve, params, Path(args.output) if args.output else path.with_suffix(".png"))
+    return write_curve_figure(curve, params, out)
 
 
 def _show(args) -> Path:
+    from .cli import PLOT_SUFFIXES
     from .plots import plot_contact_map
 
     path = resolve_run(args.run)
     curve, params, fpath = load_run(path)
     fields = _need_fields(path, fpath, params)
     k = pick_step(fields, args.step)
-    out = Path(args.output) if args.output else path.with_name(f"{path.stem}.step{k}.png")
+    out = _output(args, path.with_name(f"{path.stem}.step{k}.png"), PLOT_SUFFIXES)
     plot_contact_map(fields, fields.snapshot(k), curve, params, out)
     return out
 
 
 def _animate(args) -> Path:
     path = resolve_run(args.run)
+    out = _output(args, path.with_suffix(".gif"), ANIMATION_SUFFIXES)
+    check_fps(args.fps, out)
     curve, params, fpath = load_run(path)
     fields = _need_fields(path, fpath, params)
-    out = Path(args.output) if args.output else path.with_suffix(".gif")
     n = animate(fields, curve, params, out, fps=args.fps, unload_only=not args.all_phases)
     print(f"{n} frames", file=sys.stderr)
     return out
@@ -216,6 +242,21 @@ def frame_steps(fields, curve, unload_only: bool = True) -> list[int]:
     return ([load[-1]] if load else []) + unload
 
 
+ANIMATION_SUFFIXES = (".gif", ".mp4")
+# A GIF stores frame durations in whole centiseconds: above 100 fps the duration
+# (int(1000 / fps) ms) is 0, which viewers replace by their own default.
+GIF_MAX_FPS = 100.0
+
+
+def check_fps(fps: float, out) -> None:
+    import math
+
+    gif = Path(out).suffix.lower() == ".gif"
+    if not (fps > 0 and math.isfinite(fps)) or (gif and fps > GIF_MAX_FPS):
+        allowed = f"0 < fps <= {GIF_MAX_FPS:g} for a GIF" if gif else "a finite fps > 0"
+        raise ViewError(f"--fps {fps:g}: expected {allowed}")
+
+
 def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = True, dpi: int = 110) -> int:
     """Write a GIF (Pillow) or MP4 (ffmpeg) of the stored snapshots; returns the frame count."""
     import shutil
@@ -227,13 +268,14 @@ def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = Tr
     from . import plots
 
     out = Path(out)
+    if out.suffix.lower() not in ANIMATION_SUFFIXES:
+        raise ViewError(f"-o {out}: the animation is written as .gif or .mp4")
+    check_fps(fps, out)
+    if out.suffix.lower() == ".mp4" and shutil.which("ffmpeg") is None:
+        raise ViewError("MP4 needs ffmpeg on the PATH; write a .gif instead (-o anim.gif)")
     steps = frame_steps(fields, curve, unload_only)
     if not steps:
         raise ViewError(f"{fields.path}: no snapshots to animate")
-    if out.suffix.lower() not in (".gif", ".mp4"):
-        raise ViewError(f"-o {out}: the animation is written as .gif or .mp4")
-    if out.suffix.lower() == ".mp4" and shutil.which("ffmpeg") is None:
-        raise ViewError("MP4 needs ffmpeg on the PATH; write a .gif instead (-o anim.gif)")
     # one colour scale for every frame: the most compressive force shown, and F_th
     fmin = 0.0
     for k in steps:
