@@ -1,5 +1,6 @@
 """Figures and views of stored runs: `tfm plot`, `tfm show`, `tfm animate`, and the
 faults a reviewer would see (captions, references, the snap-off jump, overlapping ticks)."""
+import re
 import time
 
 import numpy as np
@@ -319,3 +320,51 @@ def test_the_fps_range_is_what_a_gif_can_store():
     with pytest.raises(ViewError):
         check_fps(GIF_MAX_FPS * 1.01, "a.gif")
     check_fps(120, "a.mp4")                                  # MP4 stores the rate itself
+
+
+# ---- contact maps: units, colour bar, contact line ----------------------------------------
+def _no_offset(label):
+    """An axis label without the common factor that plots.fold_x_offsets adds on saving."""
+    return re.sub(r" \(\$\\times.*\)$", "", label)
+
+
+def test_show_and_animate_of_an_si_run_name_the_units_like_tfm_plot(si_run, monkeypatch, tmp_path):
+    """The contact map's axes and colour bar, the curve panel beside it and the snapshot
+    title of an SI run had no units; the curve panel now has tfm plot's labels exactly."""
+    from tfm import viewcli
+    from tfm.viewcli import _need_fields, load_run
+
+    curve, params, fpath = load_run(si_run)
+    fields = _need_fields(si_run, fpath, params)
+    snap = fields.snapshot(fields.event_step("pull_off"))
+    reference = plots.plot_curve(curve, params).axes[0]
+
+    def assert_units(fig):
+        ax_map, ax_curve, cbar = fig.axes[:3]
+        assert (_no_offset(ax_map.get_xlabel()), ax_map.get_ylabel()) == ("$x$ in m", "$y$ in m")
+        assert cbar.get_ylabel() == "spring force $F$ in N (tension > 0)"
+        assert ax_curve.get_ylabel() == reference.get_ylabel() == "force $P$ in N (compression > 0)"
+        assert _no_offset(ax_curve.get_xlabel()) == _no_offset(reference.get_xlabel()) == "indentation $\\delta = -d$ in m"
+        title = fig._suptitle.get_text().splitlines()[-1]
+        assert re.search(r"\$\\delta\$ = .* m, \$P\$ = .* N, ", title), title
+
+    assert_units(plots.plot_contact_map(fields, snap, curve, params))
+    figures = []
+    real = plots.map_figure
+    monkeypatch.setattr(plots, "map_figure", lambda *a, **k: figures.append(real(*a, **k)) or figures[-1])
+    viewcli.animate(fields, curve, params, tmp_path / "si.gif")
+    assert_units(figures[0][0])
+
+
+def test_paper_unit_contact_maps_keep_their_labels(stored_run):
+    from tfm.viewcli import _need_fields, load_run
+
+    curve, params, fpath = load_run(stored_run)
+    fields = _need_fields(stored_run, fpath, params)
+    fig = plots.plot_contact_map(fields, fields.snapshot(fields.event_step("pull_off")), curve, params)
+    ax_map, ax_curve, cbar = fig.axes[:3]
+    assert (ax_map.get_xlabel(), ax_map.get_ylabel()) == ("$x$", "$y$")
+    assert cbar.get_ylabel() == "spring force $F$ (tension > 0)"
+    assert (_no_offset(ax_curve.get_xlabel()), ax_curve.get_ylabel()) == \
+        ("indentation $\\delta = -d$", "force $P$ (compression > 0)")
+    assert " m," not in fig._suptitle.get_text() and " N," not in fig._suptitle.get_text()

@@ -27,8 +27,30 @@ DPI = 200
 STYLE = {"font.size": 8, "axes.labelsize": 8, "axes.titlesize": 8, "legend.fontsize": 7,
          "xtick.labelsize": 7, "ytick.labelsize": 7, "lines.linewidth": 1.0, "legend.frameon": False,
          "axes.formatter.use_mathtext": True}
-FORCE_LABEL = "force $P$ (compression > 0)"
-INDENT_LABEL = "indentation $\\delta = -d$"
+
+
+def unit_suffixes(p) -> tuple[str, str]:
+    """(length, force) units after a number: " m", " N" for an SI run, none in paper units."""
+    return (" m", " N") if p is not None and p.units == "si" else ("", "")
+
+
+def axis_label(name: str, kind: str, p=None, note: str = "") -> str:
+    """``name``, `` in m`` / `` in N`` for an SI run (``kind`` "length" or "force"), then
+    `` (note)``: the one spelling of units for every figure of a run."""
+    unit = unit_suffixes(p)[("length", "force").index(kind)]
+    return name + (f" in{unit}" if unit else "") + (f" ({note})" if note else "")
+
+
+def force_label(p=None) -> str:
+    return axis_label("force $P$", "force", p, "compression > 0")
+
+
+def indent_label(p=None) -> str:
+    return axis_label("indentation $\\delta = -d$", "length", p)
+
+
+FORCE_LABEL = force_label()
+INDENT_LABEL = indent_label()
 
 
 # ---- shared helpers -----------------------------------------------------------
@@ -106,7 +128,7 @@ def _spacing_label(spacing):
 def run_caption(p) -> str:
     """The parameters that matter for a run, caption style (alpha only where it acts)."""
     si = p.units == "si"
-    m, N = (" m", " N") if si else ("", "")
+    m, N = unit_suffixes(p)
     if p.shape == "height_map":
         body = "height map " + Path(p.height_map).name.replace("$", "\\$")
     else:
@@ -277,12 +299,10 @@ def write_curve_figure(curve, params, path) -> Path:
 
 
 def _curve_axes(ax1, ax2, p=None):
-    si = p is not None and p.units == "si"
-    force = "force $P$ in N (compression > 0)" if si else FORCE_LABEL
-    ax1.set_xlabel(INDENT_LABEL + (" in m" if si else ""))
-    ax1.set_ylabel(force)
-    ax2.set_xlabel(force)
-    ax2.set_ylabel("contact radius $a$" + (" in m" if si else ""))
+    ax1.set_xlabel(indent_label(p))
+    ax1.set_ylabel(force_label(p))
+    ax2.set_xlabel(force_label(p))
+    ax2.set_ylabel(axis_label("contact radius $a$", "length", p))
     for ax in (ax1, ax2):
         ax.axhline(0, color="0.7", lw=0.5)
     # one legend: (b) draws the same lines, and a second box found no free corner in a(P)
@@ -306,10 +326,10 @@ def force_limits(f_th_max, fields_force_min):
 class ContactMap:
     """The force per spring on a diverging map (tension red, compression blue; the colour
     bar ends at the threshold F_th, marked), springs released by a snap in grey, and the
-    contact line (boundary of the contact set) in black. ``update(snap)`` redraws only
-    what changes, for animations."""
+    contact line (boundary of the contact set) in black. ``params``, the run's record,
+    gives the units. ``update(snap)`` redraws only what changes, for animations."""
 
-    def __init__(self, ax, fields, snap, vlim=None, colorbar=True):
+    def __init__(self, ax, fields, snap, vlim=None, colorbar=True, params=None):
         import matplotlib as mpl
 
         self.ax, self.fields = ax, fields
@@ -341,11 +361,11 @@ class ContactMap:
             self.grey.set_alpha(released)
         self._line(snap)
         ax.set_aspect("equal")
-        ax.set_xlabel("$x$")
-        ax.set_ylabel("$y$")
+        ax.set_xlabel(axis_label("$x$", "length", params))
+        ax.set_ylabel(axis_label("$y$", "length", params))
         if colorbar:
             cb = ax.figure.colorbar(self.image, ax=ax, shrink=0.9, pad=0.02)
-            cb.set_label("spring force $F$ (tension > 0)")
+            cb.set_label(axis_label("spring force $F$", "force", params, "tension > 0"))
             lo = self.norm.vmin
             ticks = [lo, 0.5 * lo, 0.0, 0.5 * self.f_th, self.f_th]
             cb.set_ticks(ticks, labels=[number(t, 2) for t in ticks[:-1]] + [f"$F_{{th}}$ = {number(self.f_th, 2)}"])
@@ -406,19 +426,20 @@ EVENT_TEXT = {"pull_off": "pull-off", "max_load": "maximum load", "first_snap": 
               "last_contact": "last step in contact"}
 
 
-def snapshot_title(snap) -> str:
+def snapshot_title(snap, params=None) -> str:
     events = [EVENT_TEXT.get(e, "") for e in snap["event"].split(",") if e in EVENT_TEXT]
     ev = f" ({', '.join(events)})" if events else ""
-    return (f"step {snap['step']}{ev}: $\\delta$ = {number(-snap['d'])}, $P$ = {number(snap['force'])}, "
+    m, N = unit_suffixes(params)
+    return (f"step {snap['step']}{ev}: $\\delta$ = {number(-snap['d'])}{m}, $P$ = {number(snap['force'])}{N}, "
             f"{snap['n_contact']} springs in contact")
 
 
-def draw_curve_marker_panel(ax, curve):
+def draw_curve_marker_panel(ax, curve, params=None):
     """P(delta) with both branches, for a panel beside a contact map; returns the marker."""
     draw_branches(ax, _NullAxes(), curve)
     (marker,) = ax.plot([], [], "o", color="k", ms=5, label="snapshot")
-    ax.set_xlabel(INDENT_LABEL)
-    ax.set_ylabel(FORCE_LABEL)
+    ax.set_xlabel(indent_label(params))
+    ax.set_ylabel(force_label(params))
     ax.axhline(0, color="0.7", lw=0.5)
     ax.legend(loc="best")
     tidy_ticks(ax)
@@ -438,13 +459,13 @@ def plot_contact_map(fields, snap, curve=None, params=None, path=None):
     """(a) the contact map of one snapshot; (b), given the curve, P(delta) with the
     snapshot marked."""
     fig, axes = map_figure(params, curve is not None)
-    ContactMap(axes[0], fields, snap)
+    ContactMap(axes[0], fields, snap, params=params)
     tidy_ticks(axes[0])
     if curve is not None:
-        marker = draw_curve_marker_panel(axes[1], curve)
+        marker = draw_curve_marker_panel(axes[1], curve, params)
         marker.set_data([-snap["d"]], [snap["force"]])
     head = wrap_caption(run_caption(params), fig.get_figwidth()) + "\n" if params is not None else ""
-    fig.suptitle(head + snapshot_title(snap), fontsize=8)
+    fig.suptitle(head + snapshot_title(snap, params), fontsize=8)
     return _save(fig, path)
 
 

@@ -289,7 +289,7 @@ def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = Tr
         fig, (ax_map, ax_curve) = plots.map_figure(params)
         fig.set_dpi(dpi)
         canvas = FigureCanvasAgg(fig)
-        marker = plots.draw_curve_marker_panel(ax_curve, curve)
+        marker = plots.draw_curve_marker_panel(ax_curve, curve, params)
         head = plots.wrap_caption(plots.run_caption(params), fig.get_figwidth()) + "\n" if params is not None else ""
         title = fig.suptitle(head, fontsize=8)
         cmap = None
@@ -298,11 +298,11 @@ def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = Tr
         for k in steps:
             snap = fields.snapshot(k)
             if cmap is None:
-                cmap = plots.ContactMap(ax_map, fields, snap, vlim=vlim)
+                cmap = plots.ContactMap(ax_map, fields, snap, vlim=vlim, params=params)
                 plots.tidy_ticks(ax_map)
             else:
                 cmap.update(snap)
-            title.set_text(head + plots.snapshot_title(snap))
+            title.set_text(head + plots.snapshot_title(snap, params))
             marker.set_data([-snap["d"]], [snap["force"]])
             if writer is not None:
                 writer.grab_frame()
