@@ -368,3 +368,48 @@ def test_paper_unit_contact_maps_keep_their_labels(stored_run):
     assert (_no_offset(ax_curve.get_xlabel()), ax_curve.get_ylabel()) == \
         ("indentation $\\delta = -d$", "force $P$ (compression > 0)")
     assert " m," not in fig._suptitle.get_text() and " N," not in fig._suptitle.get_text()
+
+
+def _square_fields(f_th):
+    """A 21 x 21 square grid (spacing 0.1) in contact within r < 0.55, forces from -1 at
+    the centre to the thresholds at the edge of the contact."""
+    from types import SimpleNamespace
+
+    x = np.linspace(-1, 1, 21)
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    con = np.hypot(X, Y) < 0.55
+    F = np.where(con, -1.0 + np.hypot(X, Y), 0.0)
+    fields = SimpleNamespace(grid=True, x=x, y=x, f_th=np.broadcast_to(f_th, X.shape), params={"spacing": 0.1})
+    return fields, {"F": F, "state": np.where(con, 1, 2)}
+
+
+def _colour_bar(f_th):
+    fig, (ax,) = plots.figure(1)
+    cmap = plots.ContactMap(ax, *_square_fields(f_th))
+    cbar = fig.axes[-1]
+    return cmap, cbar, [t.get_text() for t in cbar.get_yticklabels()]
+
+
+def test_the_colour_bar_says_max_f_th_when_thresholds_vary():
+    """With threshold disorder the bar ends at the largest threshold: it was labelled as
+    if it were the threshold."""
+    rng = np.random.default_rng(0)
+    varied = 0.1 * (1 + 0.3 * rng.random((21, 21)))
+    _, _, labels = _colour_bar(varied)
+    assert labels[-1].startswith("max $F_{th}$ = ") and labels[-1].endswith(plots.number(varied.max(), 2))
+    _, _, labels = _colour_bar(0.1)
+    assert labels[-1] == f"$F_{{th}}$ = {plots.number(0.1, 2)}"
+
+
+def test_the_colour_bar_of_a_run_without_adhesion_has_no_tension_half():
+    """F_th = 0: the bar's tension half spanned 0 to 1e-300, half the bar, with the F_th
+    label on the 0 tick. Now it runs from the most compressive force to 0, white at 0."""
+    import matplotlib as mpl
+
+    cmap, cbar, labels = _colour_bar(0.0)
+    assert (cmap.norm.vmin, cmap.norm.vmax) == (-1.0, 0.0)
+    assert cbar.get_ylim() == (-1.0, 0.0)
+    assert not any("F_{th}" in t for t in labels) and labels[-1] == "0"
+    white = mpl.colormaps[plots.CONTACT_CMAP](0.5)
+    assert np.allclose(cmap.image.cmap(cmap.norm(0.0)), white)
+    assert np.allclose(cmap.image.cmap(cmap.norm(-1.0)), mpl.colormaps[plots.CONTACT_CMAP](0.0))

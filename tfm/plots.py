@@ -317,15 +317,18 @@ CONTACT_CMAP = "RdBu_r"          # diverging: tension (F > 0) red, compression b
 
 
 def force_limits(f_th_max, fields_force_min):
-    """Colour limits: from the most compressive force shown up to the threshold F_th (a
-    spring in contact never carries more tension), zero at the centre of the map."""
-    hi = max(float(f_th_max), 1e-300)
+    """Colour limits: from the most compressive force shown up to the largest threshold
+    F_th (a spring in contact never carries more tension), zero at the centre of the map.
+    Without adhesion (F_th = 0) the upper limit is 0: there is no tension half (and both
+    are 0 when no spring carries any force)."""
+    hi = max(float(f_th_max), 0.0)
     return min(float(fields_force_min), -hi), hi
 
 
 class ContactMap:
     """The force per spring on a diverging map (tension red, compression blue; the colour
-    bar ends at the threshold F_th, marked), springs released by a snap in grey, and the
+    bar ends at the threshold F_th, marked, or at the largest one when thresholds vary;
+    compression only without adhesion), springs released by a snap in grey, and the
     contact line (boundary of the contact set) in black. ``params``, the run's record,
     gives the units. ``update(snap)`` redraws only what changes, for animations."""
 
@@ -334,17 +337,24 @@ class ContactMap:
 
         self.ax, self.fields = ax, fields
         self.f_th = float(np.nanmax(fields.f_th))
+        self.f_th_varies = float(np.nanmin(fields.f_th)) < self.f_th      # disorder, jittered areas
         if vlim is None:
             con = np.asarray(snap["state"]) == 1
             vlim = force_limits(self.f_th, np.asarray(snap["F"])[con].min() if con.any() else 0.0)
-        self.norm = mpl.colors.TwoSlopeNorm(vcenter=0.0, vmin=vlim[0], vmax=vlim[1])
+        lo, hi = vlim
+        cmap = mpl.colormaps[CONTACT_CMAP]
+        if hi > 0:
+            self.norm = mpl.colors.TwoSlopeNorm(vcenter=0.0, vmin=lo, vmax=hi)
+        else:        # no adhesion: the compressive half of the same colours, white at F = 0
+            self.norm = mpl.colors.Normalize(vmin=lo if lo < 0 else -1.0, vmax=0.0)   # -1: no force at all
+            cmap = mpl.colors.ListedColormap(cmap(np.linspace(0.0, 0.5, 128)))
         self.contour = None
         shown, released = self._layers(snap)
         if fields.grid:
             half = 0.5 * (fields.x[1] - fields.x[0])
             self.extent = [fields.x[0] - half, fields.x[-1] + half, fields.y[0] - half, fields.y[-1] + half]
             # arrays are [x, y]: transposed, x runs left to right and y upwards
-            self.image = ax.imshow(shown.T, origin="lower", extent=self.extent, cmap=CONTACT_CMAP,
+            self.image = ax.imshow(shown.T, origin="lower", extent=self.extent, cmap=cmap,
                                    norm=self.norm, interpolation="nearest")
             self.grey = ax.imshow(released.T, origin="lower", extent=self.extent,
                                   cmap=mpl.colors.ListedColormap(["0.75"]), interpolation="nearest")
@@ -356,7 +366,7 @@ class ContactMap:
             axis_pt = 0.42 * WIDTH * 72.0            # the map panel is about 0.42 of the width
             size = (1.15 * axis_pt * spacing / (x.max() - x.min())) ** 2
             self.grey = ax.scatter(x, y, s=size, c="0.75", marker="h", linewidths=0)
-            self.image = ax.scatter(x, y, s=size, c=shown, cmap=CONTACT_CMAP, norm=self.norm, marker="h",
+            self.image = ax.scatter(x, y, s=size, c=shown, cmap=cmap, norm=self.norm, marker="h",
                                     linewidths=0, plotnonfinite=False)
             self.grey.set_alpha(released)
         self._line(snap)
@@ -366,10 +376,14 @@ class ContactMap:
         if colorbar:
             cb = ax.figure.colorbar(self.image, ax=ax, shrink=0.9, pad=0.02)
             cb.set_label(axis_label("spring force $F$", "force", params, "tension > 0"))
-            lo = self.norm.vmin
-            ticks = [lo, 0.5 * lo, 0.0, 0.5 * self.f_th, self.f_th]
-            cb.set_ticks(ticks, labels=[number(t, 2) for t in ticks[:-1]] + [f"$F_{{th}}$ = {number(self.f_th, 2)}"])
-            cb.ax.axhline(self.f_th, color="k", lw=1.5)
+            ticks = [lo, 0.5 * lo, 0.0] if lo < 0 else [0.0]
+            labels = [number(t, 2) for t in ticks]
+            if hi > 0:
+                name = "max $F_{th}$" if self.f_th_varies else "$F_{th}$"
+                ticks += [0.5 * hi, hi]
+                labels += [number(0.5 * hi, 2), f"{name} = {number(hi, 2)}"]
+                cb.ax.axhline(hi, color="k", lw=1.5)
+            cb.set_ticks(ticks, labels=labels)
 
     def _layers(self, snap):
         F = np.asarray(snap["F"], dtype=float)
