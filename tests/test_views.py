@@ -413,3 +413,46 @@ def test_the_colour_bar_of_a_run_without_adhesion_has_no_tension_half():
     white = mpl.colormaps[plots.CONTACT_CMAP](0.5)
     assert np.allclose(cmap.image.cmap(cmap.norm(0.0)), white)
     assert np.allclose(cmap.image.cmap(cmap.norm(-1.0)), mpl.colormaps[plots.CONTACT_CMAP](0.0))
+
+
+def _line_vertices(artist):
+    if hasattr(artist, "get_paths"):
+        return np.concatenate([p.vertices for p in artist.get_paths() if len(p.vertices)])
+    return artist.get_xydata()
+
+
+@pytest.mark.parametrize("layout", ["square", "hexagonal", "jittered"])
+def test_the_contact_line_runs_between_contact_and_free_springs(layout):
+    """On hexagonal and jittered layouts the contact line joined the outermost contact
+    spring of each angle bin: it ran through contact springs and spiked into the contact.
+    It now separates the contact set from the rest, as on the square grid: it encloses
+    every spring in contact and no other, and each of its points lies within one spacing
+    of both a contact and a free spring."""
+    from types import SimpleNamespace
+
+    from matplotlib.path import Path as MPath
+    from scipy.spatial import cKDTree
+
+    from tfm import geometry
+
+    a = 1 / 32
+    lay = {"square": lambda: geometry.square_grid(a, 0.5), "hexagonal": lambda: geometry.hexagonal_grid(a, 0.5),
+           "jittered": lambda: geometry.jittered_grid(a, 0.5, 0.25, 1)}[layout]()
+    con = np.hypot(lay.x, lay.y + 0.03) < 0.21
+    state = np.where(con, 1, 2)
+    if layout == "square":
+        n = lay.shape[0]
+        x = lay.x.reshape(n, n)[:, 0]
+        fields = SimpleNamespace(grid=True, x=x, y=x, f_th=np.full((n, n), 0.1), params={"spacing": a})
+        snap = {"F": np.zeros((n, n)), "state": state.reshape(n, n)}
+    else:
+        fields = SimpleNamespace(grid=False, x=lay.x, y=lay.y, f_th=np.full(lay.n, 0.1), params={"spacing": a})
+        snap = {"F": np.zeros(lay.n), "state": state}
+    fig, (ax,) = plots.figure(1)
+    line = plots.ContactMap(ax, fields, snap, colorbar=False).contour
+    loop = MPath(_line_vertices(line))
+    pts = np.column_stack([lay.x, lay.y])
+    inside = loop.contains_points(pts)
+    assert inside[con].all() and not inside[~con].any()
+    v = _line_vertices(line)
+    assert (cKDTree(pts[con]).query(v)[0] < a).all() and (cKDTree(pts[~con]).query(v)[0] < a).all()

@@ -349,6 +349,7 @@ class ContactMap:
             self.norm = mpl.colors.Normalize(vmin=lo if lo < 0 else -1.0, vmax=0.0)   # -1: no force at all
             cmap = mpl.colors.ListedColormap(cmap(np.linspace(0.0, 0.5, 128)))
         self.contour = None
+        self._triangulation = None
         shown, released = self._layers(snap)
         if fields.grid:
             half = 0.5 * (fields.x[1] - fields.x[0])
@@ -393,18 +394,24 @@ class ContactMap:
         return shown, released
 
     def _line(self, snap):
+        """The 0.5 level of the contact indicator interpolated linearly between springs: on
+        the lattice for the square grid, on the Delaunay triangulation of the springs for
+        other layouts; either way it crosses every contact-to-free neighbour pair halfway."""
         if self.contour is not None:
             self.contour.remove()
             self.contour = None
         con = np.asarray(snap["state"]) == 1
-        if not con.any():
+        if not con.any() or con.all():
             return
+        style = dict(levels=[0.5], colors="k", linewidths=0.8)
         if self.fields.grid:
-            if (~con).any():
-                self.contour = self.ax.contour(self.fields.x, self.fields.y, con.astype(float).T, levels=[0.5],
-                                               colors="k", linewidths=0.8)
+            self.contour = self.ax.contour(self.fields.x, self.fields.y, con.astype(float).T, **style)
         else:
-            self.contour = _hull_line(self.ax, self.fields, con)
+            if self._triangulation is None:
+                from matplotlib.tri import Triangulation
+
+                self._triangulation = Triangulation(self.fields.x, self.fields.y)
+            self.contour = self.ax.tricontour(self._triangulation, con.astype(float), **style)
 
     def artists(self):
         """What changes from one snapshot to the next."""
@@ -419,21 +426,6 @@ class ContactMap:
             self.image.set_array(shown)
             self.grey.set_alpha(released)
         self._line(snap)
-
-
-def _hull_line(ax, fields, con):
-    """Contact line of a scattered layout: the outermost contact spring per angle bin."""
-    if con.sum() < 8:
-        return None
-    x, y = fields.x[con], fields.y[con]
-    ang = np.arctan2(y, x)
-    r = np.hypot(x, y)
-    k = np.digitize(ang, np.linspace(-np.pi, np.pi, 73))
-    pts = [(ang[k == b][np.argmax(r[k == b])], r[k == b].max()) for b in np.unique(k)]
-    th, rr = np.array(pts).T
-    th, rr = np.append(th, th[0] + 2 * np.pi), np.append(rr, rr[0])
-    (line,) = ax.plot(rr * np.cos(th), rr * np.sin(th), "k-", lw=0.8)
-    return line
 
 
 EVENT_TEXT = {"pull_off": "pull-off", "max_load": "maximum load", "first_snap": "first snap",
