@@ -162,7 +162,7 @@ def si_run(tmp_path_factory):
 
 
 def test_the_views_of_an_si_run_show_its_snapshots_in_newtons(si_run):
-    """Snapshots are stored in paper units; the views of an SI run scale their forces by F*
+    """The views of an SI run show its snapshots in newtons (older files hold F*: scaled by F*)
     (they showed the marker at P = -7e-11 beside a curve in newtons, and F_th likewise).
     Against the SI curve table and the SI record: the same P at every stored step, to
     round-off (one multiplication each way), and F_th in newtons."""
