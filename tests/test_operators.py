@@ -82,6 +82,26 @@ def test_boussinesq_with_small_self_term_is_refused_and_paper_value_accepted():
     assert check_positive_definite(q, kernel_spec(q, make_layout(q)), make_layout(q)) > 0
 
 
+def test_jittered_close_pair_outside_the_central_patch_is_refused():
+    """The tester's layout: one pair 0.258 spacings apart (1/r above the self term
+    3.8/spacing, so C is indefinite) lies outside the dense check's central patch; the
+    run was accepted and its contact solves never converged."""
+    kw = dict(spacing=1 / 64, f_th=0, alpha=0, shape="flat_punch", radius=0.4, max_indent=0.01,
+              step=1e-3, layout="jittered", operator="direct", jitter=0.38, seed=4)
+    p = Params.from_dict(kw)
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    with pytest.raises(IllPosedKernel, match=r"jitter=0\.38, seed=4 .* 0\.258 spacings apart.*"
+                                             r"Lower jitter \(below 0\.368"):
+        check_positive_definite(p, spec, layout)
+    central = np.argsort(layout.x ** 2 + layout.y ** 2)[:1200]
+    rc = np.hypot(layout.x[central], layout.y[central]).max()
+    assert np.hypot(0.1934, -0.2992) > rc          # the pair's place, from the message
+    # below the stated jitter no pair can be that close: the same seed is accepted
+    q = Params.from_dict({**kw, "jitter": 0.36})
+    assert check_positive_definite(q, kernel_spec(q, make_layout(q)), make_layout(q)) > 0
+
+
 @pytest.mark.parametrize("choice", ["fft", "stencil", "diagonal"])
 def test_preconditioners_are_symmetric_positive_definite(choice):
     """PCG needs an SPD preconditioner on every contact set; check on a random set."""

@@ -173,7 +173,8 @@ def check_positive_definite(p: Params, spec: KernelSpec, layout: Layout, symbol=
     Square grid: the circulant embedding's symbol bounds the spectrum of the grid matrix
     (a principal submatrix), so min symbol > 0 proves positive definiteness; for a
     truncated kernel it samples the lattice symbol exactly, including the checkerboard.
-    Other layouts: the smallest eigenvalue of the dense matrix of a central patch."""
+    Other layouts: every close pair of springs (``_check_pairs``, all springs), then the
+    smallest eigenvalue of the dense matrix of a central patch."""
     if spec.kind == LOCAL:
         return float(spec.diag.min())
     if layout.shape is not None:
@@ -181,6 +182,7 @@ def check_positive_definite(p: Params, spec: KernelSpec, layout: Layout, symbol=
         smin = float(sym.min())
         scale = float(np.abs(sym).max())
     else:
+        _check_pairs(p, spec, layout)
         order = np.argsort(layout.x ** 2 + layout.y ** 2)[:1200]
         xs, ys = layout.x[order], layout.y[order]
         r = np.hypot(xs[:, None] - xs[None, :], ys[:, None] - ys[None, :])
@@ -188,15 +190,65 @@ def check_positive_definite(p: Params, spec: KernelSpec, layout: Layout, symbol=
         C[np.diag_indices_from(C)] = spec.diag[order]
         eig = np.linalg.eigvalsh(C)
         smin, scale = float(eig[0]), float(eig[-1])
-    if smin <= 1e-12 * scale:
-        what = f"kernel={p.kernel!r}"
-        if p.kernel == "neighbors":
-            what += f", neighbor_rings={p.neighbor_rings}"
+    if smin <= PD_RTOL * scale:
         raise IllPosedKernel(
-            f"kernel: the compliance with {what}, self_term={p.self_term:g} is not positive definite "
+            f"kernel: the compliance with {_kernel_params(p)} is not positive definite "
             f"(smallest symbol/eigenvalue {smin:.4g} against a largest of {scale:.4g}), so the contact "
-            "problem is ill-posed. Raise self_term or change the kernel.")
+            f"problem is ill-posed. {_kernel_advice(p)}")
     return smin
+
+
+#: smallest eigenvalue / largest at or below which the compliance counts as singular
+PD_RTOL = 1e-12
+
+
+def _kernel_params(p: Params) -> str:
+    what = f"kernel={p.kernel!r}"
+    if p.kernel == "neighbors":
+        what += f", neighbor_rings={p.neighbor_rings}"
+    what += f", self_term={p.self_term:g}"
+    if p.layout == "jittered":
+        what += f", layout='jittered', jitter={p.jitter:g}, seed={p.seed}"
+    return what
+
+
+def _kernel_advice(p: Params) -> str:
+    if p.layout == "jittered" and p.kernel != "local":
+        # springs stay >= (1 - 2 jitter) spacings apart; C_ij = 1/r < C_ii there
+        safe = (1.0 - 1.0 / p.self_term) / 2.0
+        return (f"Lower jitter (below {safe:.3g} no pair is closer than 1/self_term spacings) or try "
+                "another seed, raise self_term or change the kernel.")
+    return "Raise self_term or change the kernel."
+
+
+def _check_pairs(p: Params, spec: KernelSpec, layout: Layout) -> None:
+    """Refuse if some pair's principal 2 x 2 block [[C_ii, C_ij], [C_ij, C_jj]] is (nearly)
+    singular or indefinite: by interlacing, C is then too. Over all springs in
+    O(N log N), where the central patch of check_positive_definite misses a close pair
+    that a jittered layout puts anywhere."""
+    dmin = float(spec.diag.min())
+    # only pairs with C_ij >= min C_ii can fail; C(r) falls with r, so find a radius
+    # beyond which it is below that
+    reach = layout.spacing / 64.0
+    while spec.offdiag(reach) >= dmin:
+        reach *= 2.0
+    from scipy.spatial import cKDTree
+    pairs = cKDTree(np.column_stack([layout.x, layout.y])).query_pairs(reach, output_type="ndarray")
+    if pairs.size == 0:
+        return
+    i, j = pairs[:, 0], pairs[:, 1]
+    r = np.hypot(layout.x[i] - layout.x[j], layout.y[i] - layout.y[j])
+    a, b, c = spec.diag[i], spec.diag[j], spec.offdiag(r)
+    mid, rad = 0.5 * (a + b), np.hypot(0.5 * (a - b), c)      # eigenvalues mid -+ rad
+    bad = mid - rad <= PD_RTOL * (mid + rad)
+    if bad.any():
+        k = int(np.argmin(np.where(bad, r, np.inf)))
+        raise IllPosedKernel(
+            f"kernel: the compliance with {_kernel_params(p)} is not positive definite: "
+            f"{int(bad.sum())} spring pair(s) lie so close that they couple more strongly than each "
+            f"spring to itself (the closest {r[k] / layout.spacing:.3g} spacings apart, at "
+            f"({layout.x[i[k]]:.4g}, {layout.y[i[k]]:.4g})), so the contact problem is ill-posed. "
+            f"{_kernel_advice(p)}")
 
 
 # ----------------------------------------------------------------- preconditioners
