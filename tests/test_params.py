@@ -37,6 +37,16 @@ def test_bad_values_are_refused_with_a_clear_message(kw, match):
         Params(**kw)
 
 
+@pytest.mark.parametrize("name", ["max_iter", "max_rounds", "max_unload_steps"])
+def test_iteration_caps_beyond_the_compiled_loops_int64_are_refused(name):
+    # "1e19" read as a whole number overflowed int64 in the compiled loop: zero CG
+    # iterations per solve (max_iter), a Numba error mid-run (max_rounds)
+    for text in ("1e19", "1e20", str(2 ** 31)):
+        with pytest.raises(ParameterError, match=rf"{name}: must be in \[1, 2147483647\], got"):
+            Params.from_dict({name: text})
+    assert getattr(Params.from_dict({name: str(2 ** 31 - 1)}), name) == 2 ** 31 - 1
+
+
 def test_from_dict_accepts_fractions_and_names_unknown_keys():
     p = Params.from_dict({"spacing": "1/64", "k_th": "0.02", "max_indent": "auto"})
     assert p.spacing == 1 / 64 and p.k_th == 0.02 and p.f_th is None

@@ -477,6 +477,12 @@ def _choice(name: str, value: Any, allowed: tuple[str, ...]) -> None:
         raise ParameterError(f"{name}: unknown value {value!r}; allowed: {', '.join(allowed)}{hint}")
 
 
+#: largest max_iter, max_rounds, max_unload_steps: the compiled loop holds them (and
+#: counts up to them) in int64, and a cap beyond int64 overflowed there (zero CG
+#: iterations, or a Numba error mid-run); 2^31 - 1 is far beyond any run that ends
+MAX_CAP = 2 ** 31 - 1
+
+
 def _integer(name: str, value: Any, low: int, high: int | None = None) -> None:
     if isinstance(value, bool) or not isinstance(value, int):
         raise ParameterError(f"{name}: expected an integer, got {value!r}")
@@ -522,10 +528,10 @@ def _validate(p: Params) -> None:
     _positive("step", p.step)
     _choice("snap_rule", p.snap_rule, SNAP_RULES)
     _positive("tol", p.tol, upper=1e-2)
-    _integer("max_iter", p.max_iter, 1)
-    _integer("max_rounds", p.max_rounds, 1)
+    _integer("max_iter", p.max_iter, 1, MAX_CAP)
+    _integer("max_rounds", p.max_rounds, 1, MAX_CAP)
     if p.max_unload_steps is not None:
-        _integer("max_unload_steps", p.max_unload_steps, 1)
+        _integer("max_unload_steps", p.max_unload_steps, 1, MAX_CAP)
     _choice("preconditioner", p.preconditioner, PRECONDITIONERS)
     _positive("extent_margin", p.extent_margin)
     if p.extent is not None:
