@@ -1,6 +1,7 @@
 """Rough surfaces (tfm.surfaces): the generator's statistics, seeds, SurfaceTopography,
 height maps, threshold disorder and the early refusal of bad input."""
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -206,6 +207,16 @@ def test_bad_height_maps_are_refused(tmp_path, array, match):
     with pytest.raises(ParameterError, match=match):
         Params(shape="height_map", height_map=m, spacing=1 / 32, f_th=0, max_indent=1e-3, step=1e-4,
                extent=0.5)
+
+
+@pytest.mark.parametrize("cut", [0, 60], ids=["empty", "truncated"])
+def test_unreadable_npy_maps_are_refused(tmp_path, cut):
+    # an empty file raised EOFError from np.load, which escaped as a traceback
+    whole = _map(tmp_path, "whole.npy")
+    broken = tmp_path / "broken.npy"
+    broken.write_bytes(Path(whole).read_bytes()[:cut])
+    with pytest.raises(ParameterError, match=r"height_map: cannot read .*broken\.npy' as a \.npy array"):
+        Params(shape="height_map", height_map=str(broken), f_th=0, max_indent=1e-3, step=1e-4)
 
 
 def test_missing_map_and_map_without_shape(tmp_path):

@@ -257,7 +257,7 @@ def load_height_map(path: str) -> HeightMap:
     if file.suffix.lower() == ".npy":
         try:
             heights = np.load(file, allow_pickle=False)
-        except (ValueError, OSError) as exc:
+        except (ValueError, OSError, EOFError) as exc:      # EOFError: an empty file
             raise MapError(f"height_map: cannot read {str(path)!r} as a .npy array: {exc}") from None
     else:
         heights, pixel, unit = _read_with_surface_topography(file)
