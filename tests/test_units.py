@@ -123,6 +123,17 @@ def test_si_force_control_loads_are_newtons(max_load):
     assert 1e-5 < res.summary["jump_off_force"] < 1e-3                 # newtons, a JKR-size load
 
 
+@pytest.mark.parametrize("max_load, limit", [(1e-3, r"max_load \(0\.001 N\)"),
+                                             (None, r"the peak load \(0\.000774519 N, the Hertz load")])
+def test_si_load_step_is_checked_in_newtons(max_load, limit):
+    # the check ran on the paper-units twin: the limit was quoted in F* (2.38732e-10) and
+    # blamed on "paper-unit values mixed in?"
+    extra = {"max_load": max_load} if max_load else {}
+    values = dict(SI, spacing=1e-5, step=1e-7, shape="paraboloid", control="force", load_step=2e-3, **extra)
+    with pytest.raises(ParameterError, match=rf"^load_step: must be <= {limit}.*, got 0\.002$"):
+        Params.from_dict(values)
+
+
 def test_units_parameters_sweep_in_a_campaign():
     base = {k: v for k, v in SI.items() if k != "work_of_adhesion"}
     spec = spec_from_dict({"name": "u", "base": dict(base, spacing=R / 16, step=R * 1e-3, shape="paraboloid",

@@ -190,7 +190,9 @@ class Params:
         which sizes the grid)."""
         if self.max_indent == "auto" and self.units == "si":
             from .units import to_paper     # same lengths in paper units with L* = 1 m
-            return to_paper(self).delta_max
+            # no load_step: the preload does not depend on it, and the twin would check it
+            # in paper units (this record checks it in newtons)
+            return to_paper(self, load_step=None).delta_max
         if self.max_indent == "auto" and getattr(self, "max_load", None) is not None:
             from .theory import preload_indent
             return float(preload_indent(self.shape, self.max_load, self.radius))
@@ -610,7 +612,10 @@ def _validate_protocol(p: Params) -> None:
 def _validate_protocol_relations(p: Params) -> None:
     if p.control == "force" and p.load_step is not None:
         if p.load_step > p.peak_load:
-            raise ParameterError(f"load_step: must be <= max_load ({p.peak_load:g}), got {p.load_step!r}")
+            unit = " N" if p.units == "si" else ""
+            peak = (f"max_load ({p.peak_load:g}{unit})" if p.max_load is not None else
+                    f"the peak load ({p.peak_load:g}{unit}, the Hertz load at max_indent; max_load is unset)")
+            raise ParameterError(f"load_step: must be <= {peak}, got {p.load_step!r}")
 
 
 # ---- roughness, height maps, threshold disorder (tfm.surfaces, tfm.threshold) ----

@@ -125,9 +125,9 @@ def jkr_pull_off_si(work_of_adhesion: float, radius: float) -> float:
     return 1.5 * math.pi * work_of_adhesion * radius
 
 
-def to_paper(p):
+def to_paper(p, **overrides):
     """The same run in the paper's units (L* = 1 m): an SI record's twin that the solver
-    runs. A paper-units record is returned as it is."""
+    runs, with ``overrides`` of its fields. A paper-units record is returned as it is."""
     if p.units != "si":
         return p
     F = force_scale(p)
@@ -143,6 +143,7 @@ def to_paper(p):
         changes["max_load"] = p.max_load / F
     if p.load_step is not None:
         changes["load_step"] = p.load_step / F
+    changes.update(overrides)
     import dataclasses
     return dataclasses.replace(p, **changes)
 
