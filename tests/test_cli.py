@@ -67,6 +67,8 @@ def no_compute(monkeypatch):
 @pytest.mark.parametrize("args, message", [
     (["-o", "{tmp}/curve.png"], "output: {tmp}/curve.png must end with .parquet"),
     (["-o", "{tmp}/curve.csv"], "must end with .parquet"),
+    (["-o", "{tmp}/.parquet"], "output: {tmp}/.parquet needs a file name before .parquet, e.g. {tmp}/curve.parquet"),
+    (["-o", "{tmp}/c.parquet", "--plot", "{tmp}/.PNG"], "plot: {tmp}/.PNG needs a file name"),
     (["-o", "{tmp}/missing/curve.parquet"], "the folder {tmp}/missing does not exist"),
     (["-o", "{tmp}/folder.parquet"], "is a folder"),
     (["-o", "/proc/curve.parquet"], "cannot write in /proc"),

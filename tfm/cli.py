@@ -109,6 +109,9 @@ def default_output(p: Params) -> Path:
 def check_output(path: Path, what: str, suffixes: tuple[str, ...], overwrite: bool, create: bool) -> None:
     """Refuse, before any computation, an output that cannot be written or would replace
     a file without ``--overwrite``. ``create`` makes a missing folder (default paths only)."""
+    if path.name.lower() in suffixes:       # ".parquet": a hidden name, no suffix for Path
+        raise OutputError(f"{what}: {path} needs a file name before {path.name}, "
+                          f"e.g. {path.with_name('curve' + path.name)}")
     if path.suffix.lower() not in suffixes:
         raise OutputError(f"{what}: {path} must end with {' or '.join(suffixes)}")
     if path.is_dir():
