@@ -30,7 +30,10 @@ from tfm.params import parse_number
     (dict(neighbor_rings=1.5), "neighbor_rings: expected an integer"),
     (dict(layout="hexagonal"), "operator: 'fft' needs a regular square grid"),
     (dict(jitter=0.7, layout="jittered", operator="direct"), "jitter"),
-    (dict(spacing=1e-5, extent=1.0), "springs a side"),
+    (dict(spacing=1e-5, extent=1.0), "would have 200001 springs a side"),
+    # counts too long to read (150 digits) or to compute (math.ceil of inf raised)
+    (dict(spacing=1 / 32, radius=1e300, max_indent=0.01, step=1e-3), r"would have 8\.32e\+150 springs a side"),
+    (dict(spacing=1e-5, extent=1e308, max_indent=0.01, step=1e-3), "would have more than 1e\\+308 springs a side"),
 ])
 def test_bad_values_are_refused_with_a_clear_message(kw, match):
     with pytest.raises(ParameterError, match=match):
@@ -55,6 +58,8 @@ def test_from_dict_accepts_fractions_and_names_unknown_keys():
         Params.from_dict({"k_t": 0.02}, where="file.toml")
     with pytest.raises(ParameterError, match="spacing: cannot read '1/x'"):
         Params.from_dict({"spacing": "1/x"})
+    with pytest.raises(ParameterError, match=r"spacing: cannot read '1/0' as a number \(division by zero\)"):
+        Params.from_dict({"spacing": "1/0"})
 
 
 def test_parse_number_forms():

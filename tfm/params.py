@@ -67,12 +67,12 @@ def parse_number(value: Any, name: str) -> float:
     if isinstance(value, str):
         text = value.strip()
         match = _FRACTION.match(text)
+        if match:                       # both parts match _DECIMAL, so float() reads them
+            num, den = (float(g) for g in match.groups())
+            if den == 0.0:
+                raise ParameterError(f"{name}: cannot read {value!r} as a number (division by zero)")
+            return num / den
         try:
-            if match:
-                num, den = (float(g) for g in match.groups())
-                if den == 0.0:
-                    raise ParameterError(f"{name}: cannot read {value!r} as a number (division by zero)")
-                return num / den
             if "/" not in text and "_" not in text:
                 return float(text)
         except ValueError:
@@ -551,8 +551,11 @@ def _validate(p: Params) -> None:
     hw = p.half_width
     if p.spacing > hw:
         raise ParameterError(f"spacing: must be <= the grid half-width ({hw:g}); got {p.spacing!r}")
-    n_side = 2 * math.ceil(hw / p.spacing) + 1
-    if n_side > 8193:
+    cells = hw / p.spacing              # a float: inf for an absurd extent (math.ceil would raise)
+    if cells > 4096:                    # 2 ceil(cells) + 1 > 8193 springs a side
+        sides = 2.0 * cells + 1.0
+        n_side = (f"{2 * math.ceil(cells) + 1}" if cells < 1e9 else f"{sides:.3g}"
+                  if math.isfinite(sides) else "more than 1e+308")
         raise ParameterError(f"extent/spacing: the grid would have {n_side} springs a side; "
                              f"the limit is 8193 (shrink extent or enlarge spacing)")
     if p.kernel == "neighbors" and p.layout != "square":
