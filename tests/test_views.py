@@ -456,3 +456,19 @@ def test_the_contact_line_runs_between_contact_and_free_springs(layout):
     assert inside[con].all() and not inside[~con].any()
     v = _line_vertices(line)
     assert (cKDTree(pts[con]).query(v)[0] < a).all() and (cKDTree(pts[~con]).query(v)[0] < a).all()
+
+
+def test_a_record_that_does_not_rebuild_is_named_not_silently_dropped(tmp_path, capsys):
+    """A height-map run whose map has moved: the figure is drawn without its caption, and
+    the views say why (the caption vanished without a word)."""
+    m = tmp_path / "map.npy"
+    np.save(m, np.zeros((41, 41)))
+    out = tmp_path / "hm.parquet"
+    assert main(["run", "--shape", "height_map", "--height-map", str(m), "--map-pixel-size", "1/32",
+                 "--spacing", "1/32", "--f-th", "0", "--alpha", "0", "--max-indent", "0.01", "--step", "1e-3",
+                 "-o", str(out), "-q", "--no-plot"]) in (0, 3)
+    m.rename(tmp_path / "moved.npy")
+    capsys.readouterr()
+    assert main(["plot", str(out), "-o", str(tmp_path / "hm.png")]) == 0
+    err = capsys.readouterr().err
+    assert "its parameter record does not rebuild" in err and "no such file" in err

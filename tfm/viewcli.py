@@ -94,8 +94,11 @@ def load_run(path: Path):
         with warnings.catch_warnings():          # a stored record is complete and was valid
             warnings.simplefilter("ignore")
             params = Params.from_dict(meta["params"]) if "params" in meta else None
-    except (ParameterError, TypeError):
-        params = None            # stored by another tfm version: draw without the caption
+    except (ParameterError, TypeError) as exc:
+        # stored by another tfm version, or its height map has moved: say so, draw anyway
+        print(f"tfm: note: {path}: its parameter record does not rebuild ({exc}); drawn without "
+              "the caption and the analytical reference", file=sys.stderr)
+        params = None
     fields = path.parent / meta["fields"] if meta.get("fields") else fields_path_for(path)
     return curve, params, (fields if fields.exists() else None)
 
