@@ -131,7 +131,9 @@ def summarize(curve: pd.DataFrame, out, p: Params, n_springs: int, grid_side: in
                         f"(half-width {p.half_width:g}); enlarge extent or extent_margin")
     if out.solver_failures:
         warnings.append(f"contact solve did not converge {out.solver_failures} times "
-                        f"(worst relative residual {out.max_residual:.2e}, tol {p.tol:g}); raise max_iter")
+                        f"(worst relative residual {out.max_residual:.2e}, tol {p.tol:g}); raise max_iter"
+                        + ("" if p.layout == "square" else ", or reduce jitter: a cluster of close springs "
+                           "can make the compliance indefinite"))
     if out.rounds_exceeded:
         warnings.append(f"snap/enter rounds hit max_rounds={p.max_rounds} at {out.rounds_exceeded} steps")
     if not out.unload_complete:
