@@ -197,6 +197,46 @@ def test_runs_from_other_code_are_reported_stale_and_can_be_rerun(tmp_path, monk
     assert len(calls) == 2
 
 
+def test_tables_follow_rewritten_runs_and_an_edited_file(tmp_path, monkeypatch):
+    """The tables were rebuilt only when the set of done or failed ids changed: after
+    --rerun-stale they kept the old runs' numbers, after a failed retry the old error, and
+    after `allow` was removed from the file (not in the run id) the old p_allow."""
+    sim_module = importlib.import_module("tfm.simulate")
+    real = sim_module.simulate
+    base = {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid", "max_indent": 0.05, "step": 5e-3}
+    spec = spec_from_dict({"name": "cur", "base": {**base, "allow": "coarse"},
+                           "sweep": {"alpha": [0.5, 0.75]}}, source="cur")
+    victim = spec.runs[1].run_id
+
+    def failing(message):
+        def simulate(params, **kwargs):
+            if params.run_id == victim:
+                raise FloatingPointError(message)
+            return real(params, **kwargs)
+        return simulate
+
+    monkeypatch.setattr(sim_module, "simulate", failing("first failure"))
+    root = run_campaign(spec, quiet=True, results_dir=tmp_path)
+    # other code: every stored run is stale, and its recomputation carries the new commit
+    for module in ("tfm.campaign.store", "tfm.results"):
+        monkeypatch.setattr(f"{module}.git_commit", lambda: "1" * 40)
+    monkeypatch.setattr(sim_module, "simulate", failing("second failure"))
+    run_campaign(spec, quiet=True, results_dir=tmp_path, rerun_stale=True)
+    summary, _ = load_tables(root)
+    assert summary["run_id"].tolist() == [spec.runs[0].run_id]
+    assert summary["prov_git_commit"].tolist() == ["1" * 40]
+    stored = read_metadata(CampaignStore(root).run_path(spec.runs[0].run_id))
+    assert summary["r_wall_time"].iloc[0] == stored["summary"]["wall_time"]
+    assert summary["prov_started_at"].iloc[0] == stored["provenance"]["started_at"]
+    assert "second failure" in load_failures(root)["error"].iloc[0]
+
+    edited = spec_from_dict({"name": "cur", "base": base, "sweep": {"alpha": [0.5, 0.75]}}, source="cur")
+    assert edited.run_ids == spec.run_ids
+    monkeypatch.setattr(sim_module, "simulate", real)
+    run_campaign(edited, quiet=True, results_dir=tmp_path, retry_failed=False)
+    assert load_tables(root)[0]["p_allow"].tolist() == [""]
+
+
 @pytest.mark.parametrize("ci, quiet, bar, line", [("true", False, False, True), ("", False, True, True),
                                                  ("", True, False, False)])
 def test_progress_bar_is_quiet_with_quiet_and_in_ci(tmp_path, monkeypatch, capsys, ci, quiet, bar, line):

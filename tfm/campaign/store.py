@@ -20,13 +20,15 @@ Every file is written to a temporary name in the same folder and renamed into pl
 so a reader sees either the old file or the new one. A run is done when its run file
 exists and its footer names the run id; leftover temporary files are removed when a
 campaign resumes. The campaign tables are rebuilt from the run files, in the campaign's
-expansion order, so they do not depend on which worker finished first.
+expansion order, so they do not depend on which worker finished first, and again
+whenever a run or failure file is rewritten or the campaign file changes.
 """
 from __future__ import annotations
 
 import contextlib
 import dataclasses
 import datetime as _dt
+import hashlib
 import json
 import os
 import platform
@@ -237,8 +239,12 @@ class CampaignStore:
     def write_tables(self, spec: CampaignSpec, status: Status | None = None) -> bool:
         """Assemble summary, curves and failures from the run files; False if already current."""
         status = status or self.status(spec)
-        record = {"name": spec.name, "description": spec.description, "run_ids": status.done,
-                  "failed": status.failed}
+        # The ids alone do not say the tables are current: --rerun-stale rewrites runs, a
+        # failed retry rewrites its record, and an edited file changes p_* (allow is not in
+        # the run id). So the record also holds the file's digest and the run files' stats.
+        record = {"name": spec.name, "description": spec.description, "sha256": spec.digest,
+                  "run_ids": status.done, "failed": status.failed,
+                  "files": self._files_digest(status)}
         if self._tables_current(record):
             return False
         import pandas as pd
@@ -279,6 +285,18 @@ class CampaignStore:
         write_table(failures_df, self.table_path("failures"), extra=extra)
         write_table(summary_df, self.table_path("summary"), extra=extra)
         return True
+
+    def _files_digest(self, status: Status) -> str:
+        """A digest of the run and failure files as they are now: identity, size and mtime
+        (one stat each, no reading; every write replaces the file by a new one)."""
+        digest = hashlib.sha256()
+        for path in [self.run_path(r) for r in status.done] + [self.failure_path(r) for r in status.failed]:
+            try:
+                st = path.stat()
+                digest.update(f"{path.name} {st.st_ino} {st.st_size} {st.st_mtime_ns}\n".encode())
+            except OSError:
+                digest.update(f"{path.name} missing\n".encode())
+        return digest.hexdigest()
 
     def _tables_current(self, record: dict[str, Any]) -> bool:
         try:
