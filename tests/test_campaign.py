@@ -74,6 +74,16 @@ def test_expansion_is_stable_and_zips_move_together():
     assert all(r.params.spacing == 1 / 16 and r.params.f_th is None for r in a.runs)
 
 
+def test_sweep_axes_come_before_zip_groups_wherever_the_file_puts_them(tmp_path):
+    """The README said "in file order", but a [[zip]] above [sweep] still varies fastest:
+    the documented order is [sweep] axes, then [[zip]] groups, whatever the layout."""
+    text = ('name = "order"\n[base]\nspacing = "1/32"\nk_th = 0.04\nshape = "paraboloid"\n'
+            'max_indent = 0.1\n[[zip]]\nradius = [1.0, 2.0]\n[sweep]\nalpha = [0.5, 0.75]\n')
+    spec = load_spec(_write(tmp_path, text))
+    assert [(r.params.alpha, r.params.radius) for r in spec.runs] == [(0.5, 1.0), (0.5, 2.0),
+                                                                       (0.75, 1.0), (0.75, 2.0)]
+
+
 def test_run_id_is_the_params_hash_with_schema_version():
     spec = spec_from_dict({"name": "x", "base": {"spacing": "1/256", "k_th": 0.02, "shape": "paraboloid",
                                                  "max_indent": 0.01, "step": 1e-3}})

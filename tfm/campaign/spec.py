@@ -12,8 +12,10 @@ A campaign file names a study, fixes base parameters and sweeps the others::
     radius = [0.5, 1.0]
     max_indent = [0.025, 0.05]
 
-The runs are the product of the ``[sweep]`` axes (in file order) and the ``[[zip]]``
-groups (in file order); the last axis varies fastest. Every run is validated through
+The runs are the product of the ``[sweep]`` axes (in file order), then the ``[[zip]]``
+groups (in file order); the last axis varies fastest. The ``[sweep]`` axes come first
+wherever the tables stand (TOML parsers do not keep the order of [[zip]] tables around
+[sweep], and existing campaigns keep their run order). Every run is validated through
 ``Params.from_dict`` before anything runs, so a typo or a bad value fails at once with
 the file, the parameter and the reason; so is every meaningful-run guard of
 ``tfm.guards`` (not the memory one: the file may run on another machine). A file that
