@@ -84,6 +84,15 @@ def test_sweep_axes_come_before_zip_groups_wherever_the_file_puts_them(tmp_path)
                                                                        (0.75, 1.0), (0.75, 2.0)]
 
 
+def test_rough_sphere_description_counts_its_own_runs():
+    """Its description said 4 seeds and a smooth run the file does not have."""
+    spec = load_spec(REPO / "campaigns" / "rough_sphere.toml")
+    seeds = len(spec.sweep["roughness_seed"])
+    assert f"{seeds} roughness seeds each" in spec.description
+    assert f"{len(spec.runs)} runs" in spec.description
+    assert all(r.params.rms_height > 0 for r in spec.runs)       # the smooth sphere is not a run
+
+
 def test_run_id_is_the_params_hash_with_schema_version():
     spec = spec_from_dict({"name": "x", "base": {"spacing": "1/256", "k_th": 0.02, "shape": "paraboloid",
                                                  "max_indent": 0.01, "step": 1e-3}})
