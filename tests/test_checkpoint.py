@@ -13,9 +13,10 @@ import pytest
 import tfm.checkpoint
 import tfm.protocol
 from tfm import Params, simulate
-from tfm.campaign import CampaignError, CampaignStore, load_spec, load_tables, run_campaign
+from tfm.campaign import (CampaignError, CampaignStore, load_spec, load_tables, run_campaign,
+                          spec_from_dict)
+from tfm.checkpoint import CheckpointWarning
 from tfm.cli import main as tfm_main
-from tfm.simulate import RunWarning
 
 # 20 loading steps and about as many unloading ones: a second or two.
 SMOKE = Path(__file__).resolve().parents[1] / "campaigns" / "smoke.toml"
@@ -99,7 +100,7 @@ def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path,
     other = P.replace(alpha=0.5)
     with pytest.raises(Stop):
         simulate(other, progress=stop_after(5), checkpoint=path, checkpoint_every=0)
-    with pytest.warns(RunWarning, match=f"belongs to run '{other.run_id}'.*starts afresh"):
+    with pytest.warns(CheckpointWarning, match=f"belongs to run '{other.run_id}'.*starts afresh"):
         res = simulate(P, checkpoint=path)
     assert res.provenance["resumed_at_step"] == 0
     assert_same_run(res, reference)
@@ -107,12 +108,12 @@ def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path,
     with pytest.raises(Stop):
         simulate(P, progress=stop_after(5), checkpoint=path, checkpoint_every=0)
     monkeypatch.setattr(tfm.checkpoint, "_CODE_HASH", "another engine")
-    with pytest.warns(RunWarning, match="another version of tfm's source"):
+    with pytest.warns(CheckpointWarning, match="another version of tfm's source"):
         res = simulate(P, checkpoint=path)
     assert res.provenance["resumed_at_step"] == 0
 
     path.write_bytes(b"not a checkpoint")
-    with pytest.warns(RunWarning, match="cannot be read"):
+    with pytest.warns(CheckpointWarning, match="cannot be read"):
         simulate(P, checkpoint=path)
 
 
@@ -157,6 +158,25 @@ def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, cap
     keep = [c for c in summary.columns if not c.startswith("prov_") and c != "r_wall_time"]
     pd.testing.assert_frame_equal(summary[keep], ref_summary[keep], check_exact=True)
     pd.testing.assert_frame_equal(curves, ref_curves, check_exact=True)
+
+
+def test_a_campaign_says_when_it_sets_a_checkpoint_aside(tmp_path, capsys):
+    """A campaign silenced every RunWarning of its runs, and the checkpoint's "starts
+    afresh" was one: the user never learnt that saved work was not used."""
+    spec = spec_from_dict({"name": "aside", "base": {"spacing": "1/32", "k_th": 0.02, "shape": "paraboloid",
+                                                     "max_indent": 0.02, "step": 1e-3}})
+    (run,) = spec.runs
+    store = CampaignStore.for_spec(spec, tmp_path)
+    other = run.params.replace(alpha=0.5)
+    with pytest.raises(Stop):              # another run's state at this run's checkpoint
+        simulate(other, progress=stop_after(3), checkpoint=store.checkpoint_path(run.run_id),
+                 checkpoint_every=0)
+    run_campaign(spec, results_dir=tmp_path)
+    err = capsys.readouterr().err
+    assert f"run 0 {run.run_id}: checkpoint" in err and f"belongs to run '{other.run_id}'" in err
+    summary, _ = load_tables(store.root)
+    assert "starts afresh" in summary["prov_checkpoint_set_aside"].iloc[0]
+    assert summary["prov_resumed_at_step"].iloc[0] == 0
 
 
 CLI_RUN = ["run", "--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.02",

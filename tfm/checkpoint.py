@@ -10,7 +10,8 @@ bit for bit, as a run that was never stopped (tests/test_checkpoint.py).
 
 A checkpoint serves only the run it was written for (the run id hashes every parameter)
 and the same engine (a hash of tfm's source files): other code could not promise the same
-bits, so the run then starts afresh, with a warning. Force control (its bisection keeps
+bits, so the run then starts afresh, with a warning (CheckpointWarning; its provenance
+says so in ``checkpoint_set_aside``). Force control (its bisection keeps
 copies of states) and runs with field snapshots (a NetCDF stream) are not checkpointed.
 """
 from __future__ import annotations
@@ -32,6 +33,12 @@ from .params import ParameterError
 FORMAT = 1
 
 _CODE_HASH = None
+
+
+class CheckpointWarning(UserWarning):
+    """A checkpoint that cannot serve its run was set aside; the run starts afresh. Not a
+    RunWarning: those flag suspect numbers and are silenced where the summary records them,
+    while this one says that saved work is not used."""
 
 
 def code_hash() -> str:
@@ -83,6 +90,7 @@ class Checkpoint:
         self.every = check_every(every)
         self._last = time.monotonic()
         self.resumed_at = None     # the step a loaded checkpoint continues from
+        self.set_aside = None      # why a checkpoint found here was not used
 
     # ---- reading -------------------------------------------------------------
     def load(self) -> Resume | None:
@@ -113,10 +121,8 @@ class Checkpoint:
         return Resume(carried, out, meta["phase"], int(meta["j"]), float(meta["elapsed"]))
 
     def _refuse(self, why: str) -> None:
-        from .simulate import RunWarning
-
-        warnings.warn(f"run {self.run_id}: checkpoint {self.path} {why}; the run starts afresh",
-                      RunWarning, stacklevel=3)
+        self.set_aside = f"checkpoint {self.path} {why}; the run starts afresh"
+        warnings.warn(f"run {self.run_id}: {self.set_aside}", CheckpointWarning, stacklevel=3)
         return None
 
     # ---- writing -------------------------------------------------------------

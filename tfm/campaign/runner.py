@@ -138,6 +138,9 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
         for run, outcome in outcomes:
             if outcome.result is not None:
                 store.write_run(run, outcome.result, outcome.fields_bytes)
+                set_aside = outcome.result.provenance.get("checkpoint_set_aside")
+                if set_aside and not quiet:
+                    bar.write(f"warning: run {run.index} {run.run_id}: {set_aside}", file=sys.stderr)
             else:
                 failed += 1
                 store.write_failure(run, outcome.error, outcome.traceback)
@@ -168,11 +171,14 @@ def execute(params, executor: str = "serial", ckpt=None) -> Outcome:
     try:
         import numba
 
+        from ..checkpoint import CheckpointWarning
         from ..config import fft_workers
         from ..simulate import RunWarning, simulate
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RunWarning)   # the flags are in the summary
+            # the provenance holds it, and the campaign process says it (_consume)
+            warnings.simplefilter("ignore", CheckpointWarning)
             result = simulate(params, **_checkpoint_args(params, ckpt))
         result.provenance.update(numba_threads=numba.get_num_threads(), fft_workers=fft_workers(),
                                  executor=executor)
