@@ -18,6 +18,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
+import tfm.checkpoint as tfm_checkpoint
 from tfm.campaign import (CampaignError, CampaignStore, load_failures, load_spec, load_tables,
                           run_campaign, spec_from_dict)
 from tfm.cli import main as tfm_main
@@ -433,6 +434,49 @@ def _wait_until_group_is_gone(pgid: int, timeout: float = 30.0) -> None:
     raise AssertionError(f"process group {pgid} still alive {timeout} s after SIGKILL")
 
 
+@pytest.mark.parametrize("sig, group", [(signal.SIGINT, False), (signal.SIGINT, True),
+                                        (signal.SIGTERM, False)])
+def test_an_interrupted_campaign_stores_what_finished_and_keeps_checkpoints(tmp_path, sig, group):
+    """SIGINT to the campaign process alone waited for the runs in flight, then dropped
+    their results, and their workers had removed the checkpoints: nothing was kept. Now
+    the finished run is stored, the runs in flight stop at once and keep their checkpoints,
+    and the command says how to resume (exit 128 + signal, no traceback); the same for
+    Ctrl-C to the process group and for SIGTERM."""
+    path = tmp_path / "stop.toml"
+    # one short run; two that would take minutes (a checkpoint after every step)
+    path.write_text('name = "stop"\n[base]\nspacing = "1/32"\nk_th = 0.02\nshape = "paraboloid"\n'
+                    'max_indent = 0.02\n[[zip]]\nalpha = [0.5, 0.7, 0.75]\nstep = [1e-3, 2e-7, 2e-7]\n')
+    spec = load_spec(path)
+    short, *long = spec.run_ids
+    store = CampaignStore(tmp_path / "stop")
+    proc = subprocess.Popen([sys.executable, "-m", "tfm", "campaign", "run", str(path), "--jobs", "2",
+                             "--checkpoint-every", "0", "--results-dir", str(tmp_path), "--quiet"],
+                            cwd=REPO, env={**os.environ, "CI": "true", "PYTHONPATH": str(REPO)},
+                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while not (store.run_path(short).exists() and store.checkpoint_path(long[0]).exists()):
+            assert proc.poll() is None, proc.stderr.read().decode()
+            assert time.monotonic() < deadline, "the short run did not finish within 2 minutes"
+            time.sleep(0.02)
+        os.killpg(proc.pid, sig) if group else proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)         # before: waited for the long runs
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    err = err.decode()
+    assert proc.returncode == 128 + sig, err
+    assert "Traceback" not in err and f"interrupted by {signal.Signals(sig).name}" in err
+    assert f"To resume, run tfm campaign run {path} again" in err
+    st = store.status(spec)
+    assert st.done == [short] and st.pending == long and st.failed == []
+    assert load_tables(store.root)[0]["run_id"].tolist() == [short]
+    meta = tfm_checkpoint.read_meta(store.checkpoint_path(long[0]))
+    assert meta["run_id"] == long[0] and meta["steps"] > 0
+    assert not store.checkpoint_path(short).exists()
+
+
 def test_a_second_runner_is_refused_while_one_holds_the_lock(tmp_path):
     store = CampaignStore(tmp_path / "smoke")
     with store.lock():
@@ -578,8 +622,9 @@ def test_a_killed_worker_fails_only_its_own_run(tmp_path):
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux only")
 def test_killing_the_campaign_stops_its_workers(tmp_path):
-    """SIGTERM to `tfm campaign run --jobs 2` while both workers compute: the workers stop
-    with it (before: they computed on as orphans until their run ended)."""
+    """SIGKILL to `tfm campaign run --jobs 2` while both workers compute: the workers stop
+    with it (before: they computed on as orphans until their run ended). SIGTERM, which
+    the campaign handles itself, is in test_an_interrupted_campaign_stores_what_finished..."""
     psutil = pytest.importorskip("psutil")
     path = tmp_path / "orphans.toml"
     # 1/256 runs take seconds each, so a worker still alive 3 s after its parent died
@@ -602,7 +647,7 @@ def test_killing_the_campaign_stops_its_workers(tmp_path):
             except psutil.NoSuchProcess:     # a child listed a moment ago has ended: look again
                 pass
             time.sleep(0.05)
-        proc.terminate()
+        proc.kill()
         proc.wait(timeout=30)
         gone, alive = psutil.wait_procs(workers, timeout=3)
     finally:

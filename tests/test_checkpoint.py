@@ -160,6 +160,23 @@ def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, cap
     pd.testing.assert_frame_equal(curves, ref_curves, check_exact=True)
 
 
+def test_a_campaign_run_keeps_its_checkpoint_until_the_campaign_stored_it(tmp_path):
+    """The worker removed the checkpoint when its run ended, before the campaign process
+    had the result: a campaign stopped then lost both."""
+    from tfm.campaign.runner import execute
+
+    spec = spec_from_dict({"name": "keep", "base": {"spacing": "1/32", "k_th": 0.02, "shape": "paraboloid",
+                                                    "max_indent": 0.02, "step": 1e-3}})
+    (run,) = spec.runs
+    store = CampaignStore.for_spec(spec, tmp_path)
+    outcome = execute(run.params, ckpt=(store, 0))        # the work of a campaign worker
+    assert outcome.result is not None, outcome.error
+    assert tfm.checkpoint.read_meta(store.checkpoint_path(run.run_id))["run_id"] == run.run_id
+    store.write_run(run, outcome.result)
+    assert store.run_metadata(run.run_id) is not None
+    assert not store.checkpoint_path(run.run_id).exists()
+
+
 def test_a_campaign_says_when_it_sets_a_checkpoint_aside(tmp_path, capsys):
     """A campaign silenced every RunWarning of its runs, and the checkpoint's "starts
     afresh" was one: the user never learnt that saved work was not used."""

@@ -37,7 +37,8 @@ def build_problem(p: Params) -> tuple[Problem, object]:
 
 
 def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkpoint=None,
-             checkpoint_every: float = CHECKPOINT_EVERY, **overrides) -> RunResult:
+             checkpoint_every: float = CHECKPOINT_EVERY, keep_checkpoint: bool = False,
+             **overrides) -> RunResult:
     """Run the loading protocol of ``p.control`` (tfm.protocol). ``simulate(spacing=1/64,
     k_th=0.02)`` and ``simulate(Params(...))`` both work. Suspect results carry flags and warn.
 
@@ -47,7 +48,9 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
 
     ``checkpoint`` (a file path, displacement control without snapshots): the run's state
     is saved there every ``checkpoint_every`` seconds, a saved state of this run is
-    continued from (same curve, bit for bit), and the file is removed when the run ends."""
+    continued from (same curve, bit for bit), and the file is removed when the run ends,
+    unless ``keep_checkpoint``: then the caller removes it once it has stored the result (a
+    campaign worker's result may yet be lost on its way to the campaign process)."""
     from . import protocol
 
     if p is None:
@@ -96,7 +99,7 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     prov["resumed_at_step"] = (ckpt.resumed_at or 0) if ckpt is not None else 0
     if ckpt is not None and ckpt.set_aside:
         prov["checkpoint_set_aside"] = ckpt.set_aside
-    if ckpt is not None:
+    if ckpt is not None and not keep_checkpoint:
         ckpt.remove()
     res = RunResult(p, curve, summary, prov)
     if writer is not None:

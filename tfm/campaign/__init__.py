@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .runner import run_campaign
+from .runner import CampaignInterrupted, run_campaign
 from .spec import CampaignError, CampaignSpec, Run, load_spec, select_runs, spec_from_dict
 from .store import CampaignStore, Status
 
@@ -34,5 +34,5 @@ def load_failures(name_or_path, results_dir="results") -> pd.DataFrame:
     return CampaignStore(campaign_root(name_or_path, results_dir)).load("failures")
 
 
-__all__ = ["CampaignError", "CampaignSpec", "CampaignStore", "Run", "Status", "campaign_root",
-           "load_failures", "load_spec", "load_tables", "run_campaign", "select_runs", "spec_from_dict"]
+__all__ = ["CampaignError", "CampaignInterrupted", "CampaignSpec", "CampaignStore", "Run", "Status",
+           "campaign_root", "load_failures", "load_spec", "load_tables", "run_campaign", "select_runs", "spec_from_dict"]

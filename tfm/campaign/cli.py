@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import signal
 import sys
 from pathlib import Path
 
@@ -80,10 +81,14 @@ def cmd_run(args) -> int:
 
     spec = load_spec(args.file, max_runs=args.max_runs)
     only = {r.run_id for r in select_runs(spec, args.where)} if args.where else None
-    root = run_campaign(spec, jobs=args.jobs, scheduler=args.scheduler, quiet=args.quiet,
-                        results_dir=args.results_dir, retry_failed=not args.skip_failed,
-                        rerun_stale=args.rerun_stale, only=only,
-                        checkpoint_every=args.checkpoint_every)
+    try:
+        root = run_campaign(spec, jobs=args.jobs, scheduler=args.scheduler, quiet=args.quiet,
+                            results_dir=args.results_dir, retry_failed=not args.skip_failed,
+                            rerun_stale=args.rerun_stale, only=only,
+                            checkpoint_every=args.checkpoint_every)
+    except KeyboardInterrupt as exc:      # CampaignInterrupted: the message says how to resume
+        print(f"tfm: {str(exc) or 'interrupted'}", file=sys.stderr)
+        return 128 + getattr(exc, "signum", signal.SIGINT)
     status = CampaignStore(root).status(spec)
     if status.flagged and not args.quiet:
         print(f"{len(status.flagged)} runs are flagged (see the r_warnings column of "

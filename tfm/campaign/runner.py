@@ -8,11 +8,18 @@ engine's reductions use fixed blocks (``tfm.config.REDUCTION_BLOCK``).
 Workers only compute; this process writes every file (``CampaignStore``), so a Dask
 cluster needs no shared file system, and a run is either fully stored or not at all.
 A run that raises is recorded as a failure (parameters and traceback) and the others go on.
+SIGINT or SIGTERM stops the campaign between two stores: the runs that finished are
+stored, the runs in flight are stopped (their checkpoints stay), and CampaignInterrupted
+says how to resume.
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import sys
+import threading
+import time
 import traceback
 import warnings
 from dataclasses import dataclass
@@ -33,6 +40,47 @@ class Outcome:
     error: str = ""
     traceback: str = ""
     fields_bytes: bytes | None = None   # field snapshots sent back by a remote (Dask) worker
+
+
+class CampaignInterrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM stopped a campaign after it stored every run that had finished."""
+
+    def __init__(self, message: str, signum: int = signal.SIGINT):
+        super().__init__(message)
+        self.signum = signum
+
+
+class _Stop:
+    """SIGINT and SIGTERM while a campaign runs: remembered and acted on between stores, so
+    that no finished run is lost to an interrupted write. Raised (KeyboardInterrupt) at once
+    only while this process computes a run itself (serial; the run's checkpoint stays). A
+    second signal ends the process outright (every file is written atomically)."""
+
+    def __init__(self):
+        self.signum: int | None = None
+        self.computing = False
+
+    def __call__(self, signum, frame):
+        self.signum = signum
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_DFL)
+        if self.computing:
+            raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def installed(self):
+        if threading.current_thread() is not threading.main_thread():
+            yield self                   # only the main thread may handle signals
+            return
+        saved = {sig: signal.signal(sig, self) for sig in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield self
+        finally:
+            for sig, handler in saved.items():
+                signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+
+
+POLL = 0.2      # seconds between looks at a stop request while waiting for runs
 
 
 def available_cores() -> int:
@@ -64,6 +112,9 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
     snapshots saves its state every ``checkpoint_every`` seconds in ``checkpoints/``
     (tfm.checkpoint; None: never, 0: after every step): after a crash it continues from
     there, not from its first step. Dask workers may not share this file system, so they do not checkpoint.
+
+    SIGINT or SIGTERM (in the main thread) stores the runs that have finished, stops the
+    others (keeping their checkpoints), writes the tables and raises CampaignInterrupted.
     """
     spec = spec_or_path if isinstance(spec_or_path, CampaignSpec) else load_spec(spec_or_path)
     if not isinstance(jobs, int) or jobs < 1:
@@ -100,17 +151,35 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
             if len(noted) > 3:
                 print(f"warning: campaign {spec.name}: {len(noted) - 3} more runs with such notes "
                       "(they are flagged in the summary)", file=sys.stderr)
-        if todo:
-            ckpt = None if checkpoint_every is None else (store, checkpoint_every)
-            if scheduler is not None:
-                outcomes = _run_dask(todo, scheduler)
-            elif jobs > 1 and len(todo) > 1:
-                outcomes = _run_pool(todo, jobs, ckpt)
-            else:
-                outcomes = _run_serial(todo, ckpt)
-            _consume(spec, store, todo, outcomes, skipped=len(status.done), quiet=quiet)
-        store.write_tables(spec)
+        stop, handled = _Stop(), set()
+        with stop.installed():
+            if todo:
+                ckpt = None if checkpoint_every is None else (store, checkpoint_every)
+                if scheduler is not None:
+                    outcomes = _run_dask(todo, scheduler, stop)
+                elif jobs > 1 and len(todo) > 1:
+                    outcomes = _run_pool(todo, jobs, ckpt, stop)
+                else:
+                    outcomes = _run_serial(todo, ckpt, stop)
+                try:
+                    _consume(spec, store, todo, outcomes, skipped=len(status.done), quiet=quiet,
+                             handled=handled)
+                except KeyboardInterrupt:
+                    if stop.signum is None:
+                        raise
+            store.write_tables(spec)
+    if stop.signum is not None:
+        raise _interrupted(spec, store, [r for r in todo if r.run_id not in handled], stop.signum)
     return store.root
+
+
+def _interrupted(spec, store, unfinished: list[Run], signum: int) -> CampaignInterrupted:
+    kept = sum(store.checkpoint_path(r.run_id).exists() for r in unfinished)
+    again = f"tfm campaign run {spec.source}" if spec.origin else "the same call"
+    return CampaignInterrupted(
+        f"campaign {spec.name} interrupted by {signal.Signals(signum).name}: the finished runs are "
+        f"stored in {store.root}; {len(unfinished)} runs did not finish, {kept} of them with a checkpoint "
+        f"to continue from. To resume, run {again} again", signum)
 
 
 def _check_memory(spec, todo: list[Run], workers: int) -> None:
@@ -131,7 +200,10 @@ def _check_memory(spec, todo: list[Run], workers: int) -> None:
                             "a coarser spacing, or allow = \"memory\" for these runs")
 
 
-def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped: int, quiet: bool) -> None:
+def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped: int, quiet: bool,
+             handled: set[str]) -> None:
+    """Store each outcome as it comes; ``handled`` collects the ids stored, also when the
+    outcomes stop early (an interrupted campaign)."""
     bar = _progress(spec.name, len(todo), quiet)
     failed = 0
     try:
@@ -146,12 +218,13 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
                 store.write_failure(run, outcome.error, outcome.traceback)
                 if not quiet:
                     bar.write(f"run {run.index} {run.run_id} failed: {outcome.error}", file=sys.stderr)
+            handled.add(run.run_id)
             bar.update(1)
             bar.set_postfix(failed=failed, refresh=False)
     finally:
         outcomes.close()
         bar.close()
-    if not quiet:
+    if not quiet and len(handled) == len(todo):
         print(f"campaign {spec.name}: {len(todo) - failed} runs done, {failed} failed, "
               f"{skipped} already done -> {store.root}", file=sys.stderr)
 
@@ -193,7 +266,9 @@ def _checkpoint_args(params, ckpt) -> dict:
     if ckpt is None or why_not(params):
         return {}
     store, every = ckpt
-    return {"checkpoint": store.checkpoint_path(params.run_id), "checkpoint_every": every}
+    # kept until the campaign process has stored the run (CampaignStore.write_run)
+    return {"checkpoint": store.checkpoint_path(params.run_id), "checkpoint_every": every,
+            "keep_checkpoint": True}
 
 
 def _set_threads(threads: int, set_env: bool = True) -> None:
@@ -212,9 +287,18 @@ def _failure(exc: BaseException) -> Outcome:
 
 
 # ---- executors: each yields (run, outcome) as runs finish --------------------
-def _run_serial(todo: list[Run], ckpt=None) -> Iterator[tuple[Run, Outcome]]:
+def _run_serial(todo: list[Run], ckpt=None,
+                stop: _Stop | None = None) -> Iterator[tuple[Run, Outcome]]:
+    stop = stop or _Stop()
     for run in todo:
-        yield run, execute(run.params, "serial", ckpt)
+        if stop.signum is not None:
+            return
+        stop.computing = True
+        try:
+            outcome = execute(run.params, "serial", ckpt)
+        finally:
+            stop.computing = False
+        yield run, outcome
 
 
 _STARTED = None          # in a pool worker: the queue on which it says what it runs
@@ -223,6 +307,8 @@ _STARTED = None          # in a pool worker: the queue on which it says what it 
 def _pool_init(threads: int, started=None) -> None:
     global _STARTED
     _STARTED = started
+    # Ctrl-C reaches the whole process group: the campaign process decides what stops
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with_parent()
     _set_threads(threads)
 
@@ -234,7 +320,6 @@ def _die_with_parent() -> None:
     if not sys.platform.startswith("linux"):
         return
     import ctypes
-    import signal
 
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # 1 = PR_SET_PDEATHSIG
@@ -254,8 +339,6 @@ def _pool_execute(run_id: str, params, executor: str, ckpt=None) -> Outcome:
 
 def _death(exitcode) -> str:
     """A worker's exit code in words."""
-    import signal
-
     if exitcode is not None and exitcode < 0:
         try:
             name = signal.Signals(-exitcode).name
@@ -269,12 +352,16 @@ def _death(exitcode) -> str:
 MAX_UNPINNED = 3            # pool breakages in a row that no run can be blamed for
 
 
-def _run_pool(todo: list[Run], jobs: int, ckpt=None) -> Iterator[tuple[Run, Outcome]]:
+def _run_pool(todo: list[Run], jobs: int, ckpt=None,
+              stop: _Stop | None = None) -> Iterator[tuple[Run, Outcome]]:
     """Runs over a spawned process pool. A worker that dies fails its own run, with the
-    cause; the pool is rebuilt and the other runs go on (those in flight are redone)."""
+    cause; the pool is rebuilt and the other runs go on (those in flight are redone).
+    On a stop request the runs that finished meanwhile are yielded and the rest dropped."""
     import multiprocessing
-    from concurrent.futures import as_completed
+    from concurrent.futures import FIRST_COMPLETED, wait
     from concurrent.futures.process import BrokenProcessPool
+
+    stop = stop or _Stop()
 
     workers = min(jobs, len(todo))
     threads = threads_per_worker(workers)
@@ -283,29 +370,40 @@ def _run_pool(todo: list[Run], jobs: int, ckpt=None) -> Iterator[tuple[Run, Outc
     started = ctx.SimpleQueue()
     remaining = {run.run_id: run for run in todo}
     unpinned = 0
-    while remaining:
+    while remaining and stop.signum is None:
         pool, procs, futures = _start_pool(ctx, min(workers, len(remaining)), threads, started,
                                            remaining.values(), ckpt)
         running: dict[int, str] = {}              # worker pid -> the run it said it took
         broken = False
+        pending = set(futures)
         try:
-            for fut in as_completed(futures):
-                run = futures[fut]
+            # waits in short slices: a stop request is seen within POLL seconds
+            while pending and not broken and stop.signum is None:
+                done, pending = wait(pending, timeout=POLL, return_when=FIRST_COMPLETED)
                 while not started.empty():        # keep the pipe drained
                     pid, rid = started.get()
                     running[pid] = rid
-                try:
-                    outcome = fut.result()
-                except BrokenProcessPool:
-                    broken = True
-                    break
-                except Exception as exc:
-                    outcome = _failure(exc)
-                del remaining[run.run_id]
-                yield run, outcome
+                for fut in done:
+                    run = futures[fut]
+                    try:
+                        outcome = fut.result()
+                    except BrokenProcessPool:
+                        broken = True
+                        continue
+                    except Exception as exc:
+                        outcome = _failure(exc)
+                    del remaining[run.run_id]
+                    yield run, outcome
         finally:
-            if not broken:
+            if pending and not broken:            # stopped, or the caller gave up: do not wait
+                _halt(pool)                       # for the runs in flight
+            elif not broken:
                 pool.shutdown(wait=True, cancel_futures=True)
+        if stop.signum is not None:
+            for fut in pending:                   # finished while the pool stopped
+                if fut.done() and not fut.cancelled() and fut.exception() is None:
+                    yield futures[fut], fut.result()
+            return
         if not broken:
             return
         pool.shutdown(wait=True, cancel_futures=True)
@@ -327,9 +425,20 @@ def _run_pool(todo: list[Run], jobs: int, ckpt=None) -> Iterator[tuple[Run, Outc
         unpinned = unpinned + 1 if not pinned else 0
         if unpinned >= MAX_UNPINNED:
             break
+    if stop.signum is not None:                   # the rest is unfinished, not failed
+        return
     for run in list(remaining.values()):
         yield run, Outcome(error=f"WorkerDied: the process pool broke {MAX_UNPINNED} times in a row "
                                  "without a run to blame; not run")
+
+
+def _halt(pool) -> None:
+    """Stop a pool now: its workers are killed (SIGTERM) mid-run, their checkpoints stay,
+    and queued runs are dropped."""
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        if proc.is_alive():
+            proc.terminate()
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _start_pool(ctx, workers: int, threads: int, started, runs, ckpt=None):
@@ -378,7 +487,8 @@ def _execute_dask(params, host_threads: dict[str, int], client_pid: int) -> Outc
     return outcome
 
 
-def _run_dask(todo: list[Run], scheduler) -> Iterator[tuple[Run, Outcome]]:
+def _run_dask(todo: list[Run], scheduler,
+              stop: _Stop | None = None) -> Iterator[tuple[Run, Outcome]]:
     try:
         from distributed import Client, as_completed as dask_completed
         from distributed.comm import get_address_host
@@ -393,15 +503,27 @@ def _run_dask(todo: list[Run], scheduler) -> Iterator[tuple[Run, Outcome]]:
             host_threads[host] = host_threads.get(host, 0) + int(info.get("nthreads", 1))
         futures = {client.submit(_execute_dask, run.params, host_threads, os.getpid(), pure=False): run
                    for run in todo}
+        stop = stop or _Stop()
+        seen = set()
         try:
-            for fut in dask_completed(list(futures)):
-                try:
-                    outcome = fut.result()
-                except Exception as exc:      # the worker died or the task was lost
-                    outcome = _failure(exc)
-                yield futures[fut], outcome
+            finished = dask_completed(list(futures))
+            while not finished.is_empty() and stop.signum is None:
+                batch = finished.next_batch(block=False)
+                if not batch:
+                    time.sleep(POLL)          # short naps: a stop request is seen at once
+                for fut in batch:
+                    try:
+                        outcome = fut.result()
+                    except Exception as exc:      # the worker died or the task was lost
+                        outcome = _failure(exc)
+                    seen.add(fut)
+                    yield futures[fut], outcome
         finally:
             client.cancel([f for f in futures if not f.done()])
+        if stop.signum is not None:           # finished while the campaign stopped
+            for fut in futures:
+                if fut not in seen and fut.status == "finished":
+                    yield futures[fut], fut.result()
     finally:
         if own:
             client.close()
