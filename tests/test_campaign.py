@@ -18,6 +18,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
+import tfm
 import tfm.checkpoint as tfm_checkpoint
 from tfm.campaign import (CampaignError, CampaignStore, load_failures, load_spec, load_tables,
                           run_campaign, spec_from_dict)
@@ -350,6 +351,39 @@ def test_jobs_2_and_dask_match_jobs_1_bitwise(serial_run, tmp_path):
     # and they really ran with different thread counts (2 cores: 2 threads serial, 1 in the pool)
     pool_threads = set(load_tables(pool_root)[0]["prov_numba_threads"])
     assert set(ref_summary["prov_numba_threads"]) != pool_threads or os.cpu_count() == 1
+
+
+def test_height_map_runs_on_dask_workers_that_cannot_read_the_map(tmp_path, monkeypatch):
+    """Dask workers need no shared disk, but a height-map run read its map on the worker:
+    it failed there (no such file) after passing validation on the client. The client now
+    sends the heights it read, and the worker checks their hash against the run's."""
+    import threading
+
+    import tfm.surfaces
+
+    distributed = pytest.importorskip("distributed")
+    x = (np.arange(65) - 32) / 64
+    np.save(tmp_path / "bowl.npy", (x[:, None] ** 2 + x[None, :] ** 2) / 2)   # a paraboloid, R = 1
+    path = tmp_path / "bowl.toml"
+    path.write_text(f'name = "bowl"\n[base]\nspacing = "1/32"\nshape = "height_map"\n'
+                    f'height_map = "{tmp_path / "bowl.npy"}"\nmap_pixel_size = "1/64"\nk_th = 0.02\n'
+                    'max_indent = 0.01\nstep = 5e-4\n')
+    (run,) = load_spec(path).runs
+    reference = tfm.simulate(run.params)
+
+    real_path = tfm.surfaces.Path
+
+    def elsewhere(*args):                 # a worker thread looks at a disk without the map
+        p = real_path(*args)
+        return p if threading.current_thread() is threading.main_thread() else real_path("/nonexistent", p.name)
+
+    monkeypatch.setattr(tfm.surfaces, "Path", elsewhere)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                                  dashboard_address=None) as cluster:
+        root = run_campaign(path, scheduler=cluster.scheduler_address, quiet=True, results_dir=tmp_path)
+    assert len(load_failures(root)) == 0, load_failures(root)["error"].tolist()
+    _, curves = load_tables(root)
+    assert_bitwise_equal(curves.drop(columns="run_id"), reference.curve)
 
 
 def test_result_does_not_depend_on_thread_count():

@@ -42,9 +42,11 @@ spacing is sampled, not averaged; a coarser one gains no detail).
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import math
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -222,6 +224,9 @@ def sample(h: np.ndarray, pixel: float, x: np.ndarray, y: np.ndarray, periodic: 
 
 # ---- height maps -------------------------------------------------------------
 _MAP_CACHE: dict[tuple, "HeightMap"] = {}
+# maps handed over with a task (a Dask worker may not see the client's files): per
+# thread, for the task's duration only, so no later task reads a stale copy
+_GIVEN = threading.local()
 
 
 class HeightMap:
@@ -241,10 +246,25 @@ class HeightMap:
         self.sha256 = digest.hexdigest()
 
 
+@contextlib.contextmanager
+def given_maps(maps: dict[str, HeightMap]):
+    """Within this block, in this thread, ``load_height_map(path)`` returns ``maps[path]``
+    instead of reading the file."""
+    before = getattr(_GIVEN, "maps", {})
+    _GIVEN.maps = {**before, **maps}
+    try:
+        yield
+    finally:
+        _GIVEN.maps = before
+
+
 def load_height_map(path: str) -> HeightMap:
     """Read and check a height map: ``.npy`` with NumPy; any other format through
     SurfaceTopography (``pip install tfm[topography]``), which supplies the pixel size
     and the unit. Raises MapError for a missing, non-2-D or non-finite map."""
+    given = getattr(_GIVEN, "maps", {}).get(str(path))
+    if given is not None:
+        return given
     file = Path(os.path.expanduser(str(path)))
     try:
         stat = file.stat()

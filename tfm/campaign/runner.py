@@ -464,10 +464,13 @@ def _start_pool(ctx, workers: int, threads: int, started, runs, ckpt=None):
     return pool, procs, futures
 
 
-def _execute_dask(params, host_threads: dict[str, int], client_pid: int) -> Outcome:
-    """The Dask task: share the host's cores among the worker threads on that host."""
+def _execute_dask(params, host_threads: dict[str, int], client_pid: int, height_map=None) -> Outcome:
+    """The Dask task: share the host's cores among the worker threads on that host.
+    ``height_map``: the run's map (a tfm.surfaces.HeightMap) as the client read it."""
     from distributed import get_worker
     from distributed.comm import get_address_host
+
+    from ..surfaces import HeightMap, given_maps
 
     worker = get_worker()
     state = getattr(worker, "state", worker)
@@ -476,7 +479,17 @@ def _execute_dask(params, host_threads: dict[str, int], client_pid: int) -> Outc
     # the environment is per process: set it only in a worker process of its own, not
     # in a client that runs its workers in-process (LocalCluster(processes=False))
     _set_threads(threads, set_env=os.getpid() != client_pid)
-    outcome = execute(params, f"dask[{threads} threads]")
+    maps = {}
+    if height_map is not None:
+        # hashed again here: the heights must be those the run id was made from
+        sent = HeightMap(height_map.heights, height_map.pixel_size, height_map.unit)
+        if sent.sha256 != params.height_map_hash:
+            return Outcome(error=f"MapError: height_map: the map sent for {params.height_map} has content "
+                                 f"hash {sent.sha256[:12]}..., the run was validated with "
+                                 f"{str(params.height_map_hash)[:12]}... (the file changed since)")
+        maps = {params.height_map: sent}
+    with given_maps(maps):
+        outcome = execute(params, f"dask[{threads} threads]")
     res = outcome.result
     if res is not None and res.fields_path is not None:
         # the worker's disk may not be the client's: send the snapshot file back
@@ -485,6 +498,20 @@ def _execute_dask(params, host_threads: dict[str, int], client_pid: int) -> Outc
         path.unlink(missing_ok=True)
         res.fields_path = None
     return outcome
+
+
+def _scatter_maps(client, todo: list[Run]) -> dict:
+    """The height maps of ``todo``, read here once each and sent to the cluster, whose
+    workers need not see this machine's files: path -> a future of its HeightMap."""
+    from ..surfaces import MapError, load_height_map
+
+    maps = {}
+    for path in dict.fromkeys(r.params.height_map for r in todo if r.params.shape == "height_map"):
+        try:
+            maps[path] = client.scatter(load_height_map(path), hash=False)
+        except MapError as exc:
+            raise CampaignError(str(exc)) from None
+    return maps
 
 
 def _run_dask(todo: list[Run], scheduler,
@@ -501,7 +528,9 @@ def _run_dask(todo: list[Run], scheduler,
         for addr, info in client.scheduler_info().get("workers", {}).items():
             host = info.get("host") or get_address_host(addr)
             host_threads[host] = host_threads.get(host, 0) + int(info.get("nthreads", 1))
-        futures = {client.submit(_execute_dask, run.params, host_threads, os.getpid(), pure=False): run
+        maps = _scatter_maps(client, todo)
+        futures = {client.submit(_execute_dask, run.params, host_threads, os.getpid(),
+                                 maps.get(run.params.height_map), pure=False): run
                    for run in todo}
         stop = stop or _Stop()
         seen = set()
