@@ -289,3 +289,33 @@ def test_help_and_status_load_no_numerical_engine(argv, tmp_path):
     out = subprocess.run([sys.executable, "-c", PROBE.format(heavy=HEAVY), *argv], capture_output=True,
                          text=True, cwd=REPO, env=ENV, timeout=60)
     assert out.stdout.splitlines()[-1] == "HEAVY", out.stdout[-300:] + out.stderr
+
+
+def test_another_runs_checkpoint_is_not_discarded_without_overwrite(tmp_path, capsys):
+    """A killed run left its state beside the table; a run with other parameters and the
+    same -o set that state aside and removed it without a word (hours of work, for a long
+    run). Now it is refused; with --overwrite it is discarded, saying so."""
+    import tfm
+
+    out = tmp_path / "kk.parquet"
+    ckpt = tmp_path / "kk.checkpoint.npz"
+    seen = []
+
+    def stop(rec):
+        seen.append(rec)
+        if len(seen) == 15:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        tfm.simulate(spacing=1 / 32, k_th=0.02, shape="paraboloid", max_indent=0.05, step=2.5e-3,
+                     checkpoint=ckpt, checkpoint_every=0, progress=stop)
+    saved = ckpt.read_bytes()
+    other = ["run", "--spacing", "1/32", "--k-th", "0.03", "--shape", "paraboloid", "--max-indent", "0.05",
+             "--step", "2.5e-3", "--no-plot", "-o", str(out)]
+    capsys.readouterr()
+    assert main(other) == 2
+    assert "holds the saved state of another run" in capsys.readouterr().err
+    assert ckpt.read_bytes() == saved and not out.exists()
+    assert main([*other, "--overwrite"]) == 0
+    assert "the run starts afresh" in capsys.readouterr().err
+    assert not ckpt.exists() and out.exists()

@@ -93,6 +93,14 @@ class Checkpoint:
         self.set_aside = None      # why a checkpoint found here was not used
 
     # ---- reading -------------------------------------------------------------
+    def saved_run_id(self) -> str | None:
+        """The run id the file here was saved for (None: no file, or not a readable checkpoint)."""
+        try:
+            with np.load(self.path, allow_pickle=False) as z:
+                return json.loads(str(z["meta"])).get("run_id")
+        except (OSError, ValueError, KeyError, AttributeError):
+            return None
+
     def load(self) -> Resume | None:
         """The saved run, or None (no file, another run or engine, unreadable: warned)."""
         from .solver import CurveResult, StepRecord

@@ -170,11 +170,32 @@ def _checkpoint_options(args, p: Params, out: Path) -> dict:
 
     reason = why_not(p)
     if args.checkpoint_every is None:
-        return {} if reason else {"checkpoint": checkpoint_path_for(out), "checkpoint_every": CHECKPOINT_EVERY}
-    every = check_every(args.checkpoint_every, "checkpoint-every")
-    if reason:
-        raise ParameterError(f"checkpoint-every: {reason}")
-    return {"checkpoint": checkpoint_path_for(out), "checkpoint_every": every}
+        every = CHECKPOINT_EVERY
+        if reason:
+            return {}
+    else:
+        every = check_every(args.checkpoint_every, "checkpoint-every")
+        if reason:
+            raise ParameterError(f"checkpoint-every: {reason}")
+    path = checkpoint_path_for(out)
+    _check_foreign_checkpoint(path, p, args.overwrite)
+    return {"checkpoint": path, "checkpoint_every": every}
+
+
+def _check_foreign_checkpoint(path: Path, p: Params, overwrite: bool) -> None:
+    """The saved state of another run (a killed run with other parameters and the same
+    -o), or a file that is no checkpoint, is not discarded without --overwrite: it was set
+    aside and lost, without a word."""
+    if not path.exists() or overwrite:
+        return
+    from .checkpoint import Checkpoint
+
+    owner = Checkpoint(path, p.run_id).saved_run_id()
+    if owner == p.run_id:
+        return                            # this run's: the run continues from it
+    what = f"the saved state of another run ({owner})" if owner else "a file that is not a readable checkpoint"
+    raise OutputError(f"checkpoint: {path} holds {what}; rerun that run's command to continue it, or pass "
+                      "--overwrite to discard it")
 
 
 def checkpoint_path_for(curve_path: Path) -> Path:
@@ -190,6 +211,7 @@ def _run_and_write(args, p: Params, notes, out: Path, ckpt: dict):
     from .progress import run_progress
     from .protocol import n_loading_steps
     from .results import fields_path_for
+    from .checkpoint import CheckpointWarning
     from .simulate import RunWarning, simulate
 
     if not args.quiet:
@@ -199,10 +221,13 @@ def _run_and_write(args, p: Params, notes, out: Path, ckpt: dict):
               f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
     for note in notes:                    # stated before the run starts
         print(f"tfm: warning: {note}", file=sys.stderr)
-    with warnings.catch_warnings(), run_progress(p, quiet=args.quiet) as progress:
-        warnings.simplefilter("ignore", RunWarning)
+    with warnings.catch_warnings(record=True) as caught, run_progress(p, quiet=args.quiet) as progress:
+        warnings.simplefilter("ignore", RunWarning)     # the summary's warnings are printed at the end
+        warnings.simplefilter("always", CheckpointWarning)
         res = simulate(p, progress=progress, fields_path=fields_path_for(out) if p.snapshots != "none" else None,
                        **ckpt)
+    for w in caught:                      # a checkpoint set aside, say
+        print(f"tfm: warning: {w.message}", file=sys.stderr)
     if res.provenance.get("resumed_at_step") and not args.quiet:
         print(f"continued from the checkpoint {ckpt['checkpoint']} at step {res.provenance['resumed_at_step']} "
               "(the steps before were computed by the run that was stopped)", file=sys.stderr)
