@@ -367,7 +367,7 @@ def test_height_map_runs_on_dask_workers_that_cannot_read_the_map(tmp_path, monk
     path = tmp_path / "bowl.toml"
     path.write_text(f'name = "bowl"\n[base]\nspacing = "1/32"\nshape = "height_map"\n'
                     f'height_map = "{tmp_path / "bowl.npy"}"\nmap_pixel_size = "1/64"\nk_th = 0.02\n'
-                    'max_indent = 0.01\nstep = 5e-4\n')
+                    'max_indent = 0.05\nstep = 2.5e-3\n')   # a ~ 7 spacings: a meaningful run
     (run,) = load_spec(path).runs
     reference = tfm.simulate(run.params)
 
