@@ -146,3 +146,16 @@ def test_an_si_runs_file_holds_its_own_record_in_newtons(tmp_path):
     fields.use_force_scale(force_scale(p))
     k = int(fields.steps[-1])
     assert fields.snapshot(k)["force"] == pytest.approx(by_step[k], rel=1e-12)
+
+
+def test_writing_a_result_twice_leaves_each_table_its_snapshots(tmp_path):
+    """The second write_curve moved the snapshots away from the first table, whose
+    metadata then named a missing file ('the run stored no field snapshots')."""
+    res = tfm.simulate(spacing=1 / 16, step=2e-3, snapshots="events", **STANDARD)
+    a, b = res.write_curve(tmp_path / "a.parquet"), res.write_curve(tmp_path / "b.parquet")
+    fa, fb = tmp_path / "a.fields.nc", tmp_path / "b.fields.nc"
+    assert fa.read_bytes() == fb.read_bytes()
+    from tfm.results import read_metadata
+    assert read_metadata(a)["fields"] == fa.name and read_metadata(b)["fields"] == fb.name
+    with pytest.raises(ValueError, match="must end with .parquet"):
+        res.write_curve(tmp_path / "c.csv")

@@ -69,17 +69,21 @@ class RunResult:
     summary: dict[str, Any]
     provenance: dict[str, Any] = field(default_factory=dict)
     fields_path: Path | None = None     # the field snapshots (NetCDF4), if any
+    _fields_placed: bool = field(default=False, repr=False)   # beside a written table
 
     @property
     def ok(self) -> bool:
         return not self.summary["warnings"]
 
     def write_curve(self, path: str | os.PathLike) -> Path:
-        """Write the curve table; field snapshots, if any, move beside it as
-        ``<stem>.fields.nc`` and the table's metadata names them (``fields``)."""
+        """Write the curve table (``.parquet``); field snapshots, if any, move beside it as
+        ``<stem>.fields.nc`` (copied, if an earlier write_curve placed them beside another
+        table) and the table's metadata names them (``fields``)."""
         from .units import unit_labels
 
         path = Path(path)
+        if path.suffix.lower() != ".parquet":
+            raise ValueError(f"write_curve: {path} must end with .parquet (the table is Parquet)")
         extra = {"units": unit_labels(self.params)}
         if self.fields_path is not None:
             dest = fields_path_for(path)
@@ -87,9 +91,13 @@ class RunResult:
                 # through a temporary name in the destination folder: a kill leaves no half file
                 dest.parent.mkdir(parents=True, exist_ok=True)
                 tmp = dest.with_name(f".{dest.name}.{os.getpid()}.tmp")
-                shutil.move(str(self.fields_path), tmp)
+                if self._fields_placed:      # the earlier table keeps its own
+                    shutil.copyfile(self.fields_path, tmp)
+                else:
+                    shutil.move(str(self.fields_path), tmp)
                 os.replace(tmp, dest)
                 self.fields_path = dest
+            self._fields_placed = True
             extra["fields"] = dest.name
         written = write_table(self.curve, path, self.params, self.provenance, self.summary, extra=extra)
         if self.fields_path is None:
