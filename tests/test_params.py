@@ -112,3 +112,31 @@ def test_none_is_no_value_for_optional_parameters_and_a_value_of_choices(tmp_pat
     assert main(["run", "--spacing", "1/16", "--k-th", "0.02", "--step", "2e-3", "--preconditioner", "none",
                  "--f-th", "None", "--no-plot", "-q", "-o", str(out)]) == 0
     assert Params.from_dict(read_metadata(out)["params"]).preconditioner == "none"
+
+
+def test_replace_reads_values_like_from_dict_and_either_threshold_clears_the_other():
+    """replace(spacing="1/32") was refused ('expected a number') though simulate(spacing=
+    "1/32") takes it, and replace(f_th=...) on a k_th record said 'give only one'."""
+    p = Params.from_dict({"k_th": 0.02})
+    assert p.replace(spacing="1/32").spacing == 1 / 32
+    q = p.replace(f_th=1e-5)
+    assert (q.f_th, q.k_th) == (1e-5, None)
+    assert q.replace(k_th=0.03).f_th is None
+    with pytest.raises(ParameterError, match=r"Params\(k_th=..., f_th=None\)"):
+        Params(k_th=0.02)
+
+
+def test_the_package_lists_its_entry_points():
+    import tfm
+
+    assert {"simulate", "RunWarning", "Params"} <= set(dir(tfm))
+
+
+def test_simulate_refuses_arguments_it_would_ignore(tmp_path):
+    import tfm
+
+    with pytest.raises(ParameterError, match="fields_path: applies only with snapshots"):
+        tfm.simulate(spacing=1 / 16, k_th=0.02, step=2e-3, fields_path=tmp_path / "x.fields.nc")
+    with pytest.raises(ParameterError, match="checkpoint_every: applies only with a checkpoint"):
+        tfm.simulate(spacing=1 / 16, k_th=0.02, step=2e-3, checkpoint_every=5)
+    assert not list(tmp_path.iterdir())

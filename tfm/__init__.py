@@ -18,6 +18,10 @@ def __getattr__(name):
     raise AttributeError(f"module 'tfm' has no attribute {name!r}")
 
 
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
+
+
 class _Package(types.ModuleType):
     """``tfm.simulate`` is the function, as with an eager ``from .simulate import simulate``:
     importing the submodule tfm.simulate sets the package attribute to the module, and

@@ -277,8 +277,13 @@ class Params:
         return cls.from_dict(values, where="table row")
 
     def replace(self, **changes: Any) -> "Params":
+        """A copy with ``changes``, read like from_dict (fractions, "none"); one of
+        k_th and f_th given clears the other."""
+        changes = {key: parse_param(key, value) for key, value in changes.items()}
         if changes.get("k_th") is not None and "f_th" not in changes:
             changes["f_th"] = None
+        if changes.get("f_th") is not None and "k_th" not in changes:
+            changes["k_th"] = None
         if "height_map" in changes and "height_map_hash" not in changes:
             changes["height_map_hash"] = None        # a new map: hash its content again
         return dataclasses.replace(self, **changes)
@@ -507,7 +512,8 @@ def _validate(p: Params) -> None:
     if p.k_th is None and p.f_th is None and p.units != "si":   # SI: _validate_units
         raise ParameterError("k_th / f_th: give one threshold, k_th (F_th = k_th A^alpha) or f_th")
     if p.k_th is not None and p.f_th is not None:
-        raise ParameterError("k_th / f_th: give only one of k_th and f_th, not both")
+        raise ParameterError("k_th / f_th: give only one of k_th and f_th, not both (f_th has a default: "
+                             "Params(k_th=..., f_th=None); Params.from_dict, replace and simulate clear it)")
     for name in ("k_th", "f_th"):
         value = getattr(p, name)
         if value is not None and _finite(name, value) < 0:

@@ -57,6 +57,11 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
         p = Params.from_dict(overrides) if overrides else Params()
     elif overrides:
         p = p.replace(**overrides)
+    # arguments that would be silently ignored are refused
+    if fields_path is not None and p.snapshots == "none":
+        raise ParameterError("fields_path: applies only with snapshots = 'events' or K (this run stores none)")
+    if checkpoint is None and checkpoint_every != CHECKPOINT_EVERY:
+        raise ParameterError("checkpoint_every: applies only with a checkpoint path (checkpoint=...)")
     ckpt = _checkpoint(p, checkpoint, checkpoint_every) if checkpoint is not None else None
     notes = check(p)                   # refuses a meaningless or oversized run up front
     for note in notes:
