@@ -754,3 +754,29 @@ def test_where_computes_only_the_selected_runs_and_resumes_the_rest(tmp_path, ca
                            ("alpha", "expected KEY=VALUE")):
         assert tfm_main(args + ["--where", where]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_run_campaign_takes_the_runs_select_runs_returns(tmp_path):
+    """The docstring says only= takes select_runs' result; it raised 'unhashable type'.
+    A single condition given as a string is one condition, not its characters."""
+    from tfm.campaign import select_runs
+
+    path = _write(tmp_path, 'name = "sel"\n[base]\nk_th = 0.02\nshape = "paraboloid"\nmax_indent = 0.025\n'
+                            'spacing = "1/16"\n[sweep]\nalpha = [0.5, 0.75]\n')
+    spec = load_spec(path)
+    chosen = select_runs(spec, "alpha=0.75")
+    assert [r.params.alpha for r in chosen] == [0.75]
+    root = run_campaign(spec, only=chosen, quiet=True, results_dir=tmp_path / "res")
+    assert load_tables(root)[0]["run_id"].tolist() == [chosen[0].run_id]
+
+
+def test_every_column_of_the_tables_is_documented(serial_run):
+    """README: docs/tables.md describes every column of every table (r_length_unit,
+    r_force_unit and prov_resumed_at_step were missing)."""
+    import re
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "tables.md").read_text()
+    named = set(re.findall(r"`([a-z_0-9]+)`", doc))
+    summary, curves = load_tables(serial_run[1])
+    missing = [c for c in [*summary.columns, *curves.columns] if c not in named and not c.startswith("p_")]
+    assert missing == []

@@ -105,7 +105,7 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
     Finished runs are skipped, so calling it again after a crash resumes the campaign.
     Failed runs are tried again unless ``retry_failed=False``. Runs stored by another
     tfm version or commit are kept (with a warning) unless ``rerun_stale=True``: the run id
-    hashes the parameters, not the code. ``only`` (run ids, e.g. from select_runs) limits
+    hashes the parameters, not the code. ``only`` (run ids or runs, e.g. from select_runs) limits
     what is computed now; the campaign tables still cover every stored run.
 
     On this machine (serial or process pool) a displacement-controlled run without field
@@ -139,8 +139,8 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
                 print(f"warning: campaign {spec.name}: {len(status.stale)} stored runs were computed "
                       "by another tfm version or commit (see prov_git_commit); they are kept. "
                       "Use --rerun-stale to recompute them.", file=sys.stderr)
-        if only is not None:
-            redo &= set(only)
+        if only is not None:                 # run ids, or the Run records select_runs returns
+            redo &= {getattr(r, "run_id", r) for r in only}
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo and scheduler is None:
             _check_memory(spec, todo, min(jobs, len(todo)))

@@ -252,6 +252,8 @@ def select_runs(spec: CampaignSpec, where) -> list[Run]:
     relative). Refused, before anything runs: a malformed item, an unknown parameter, and a
     selection that matches no run (the message lists the values the campaign has)."""
     conditions = []
+    if isinstance(where, str):              # one condition, not its characters
+        where = [where]
     for item in where:
         key, sep, raw = str(item).partition("=")
         key = key.strip().replace("-", "_")
