@@ -780,3 +780,14 @@ def test_every_column_of_the_tables_is_documented(serial_run):
     summary, curves = load_tables(serial_run[1])
     missing = [c for c in [*summary.columns, *curves.columns] if c not in named and not c.startswith("p_")]
     assert missing == []
+
+
+def test_a_kernel_that_is_not_positive_definite_is_refused_before_anything_runs():
+    """README: such a kernel "is refused" and every run is validated before anything runs;
+    a campaign file expanded, then failed each run at its start (IllPosedKernel)."""
+    base = {"spacing": "1/32", "k_th": 0.02, "shape": "paraboloid", "max_indent": 0.05, "step": 1e-3,
+            "kernel": "neighbors"}
+    with pytest.raises(CampaignError, match="not positive definite"):
+        spec_from_dict({"name": "bad", "base": base, "sweep": {"neighbor_rings": [1, 2]}})
+    with pytest.raises(tfm.ParameterError, match="not positive definite"):      # as tfm run says
+        tfm.simulate(**{**base, "neighbor_rings": 1})

@@ -152,6 +152,27 @@ def contact_reached_note(p, max_n_contact: int) -> str | None:
             "preload deeper (allow='coarse' accepts it)")
 
 
+def kernel_check_key(p) -> tuple | None:
+    """What tfm.operators.check_record's answer depends on. None: nothing to check, a
+    local kernel or the default one on the square grid (its smallest symbol is 0.89 /
+    spacing from 15^2 to 513^2 springs, measured 2026-11-24). On the square grid C is a
+    function of r / spacing times 1 / spacing, so only the kernel and the grid's size
+    matter; other layouts depend on the positions themselves."""
+    if p.kernel == "local":
+        return None                                   # a positive diagonal
+    kernel = (p.kernel, p.self_term, p.neighbor_rings if p.kernel == "neighbors" else None)
+    if p.layout == "square":
+        if p.kernel == "boussinesq" and p.self_term == _default_self_term():
+            return None
+        return (*kernel, "square", math.ceil(p.half_width / p.spacing - 1e-9))
+    return (*kernel, p.layout, p.jitter, p.seed, p.spacing, p.half_width)
+
+
+def _default_self_term() -> float:
+    from .params import Params
+    return Params.__dataclass_fields__["self_term"].default
+
+
 def _allowed(p) -> set[str]:
     return set(filter(None, p.allow.split(",")))
 

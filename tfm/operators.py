@@ -198,6 +198,16 @@ def check_positive_definite(p: Params, spec: KernelSpec, layout: Layout, symbol=
     return smin
 
 
+def check_record(p: Params) -> None:
+    """``check_positive_definite`` for a parameter record alone (campaign files are checked
+    before anything runs): builds the layout and the grid symbol it needs."""
+    from .geometry import make_layout
+
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    check_positive_definite(p, spec, layout)
+
+
 #: smallest eigenvalue / largest at or below which the compliance counts as singular
 PD_RTOL = 1e-12
 

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from ..guards import GuardError, check
+from ..guards import GuardError, check, kernel_check_key
 from ..params import ParameterError, Params, ParameterWarning, parse_param
 
 if sys.version_info >= (3, 11):
@@ -196,6 +196,7 @@ def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>", max_runs:
 
 
 def _expand(base, sweep, zips, where):
+    kernels_checked: dict[tuple, str | None] = {}     # kernel_check_key -> refusal, if any
     axes = [[{k: v} for v in values] for k, values in sweep.items()]
     axes += [[dict(zip(group, values)) for values in zip(*group.values())] for group in zips]
     for index, combo in enumerate(itertools.product(*axes)):
@@ -212,11 +213,32 @@ def _expand(base, sweep, zips, where):
                     warnings.filterwarnings("ignore", message=f"{key}: given but", category=ParameterWarning)
                 params = Params.from_dict(values, where=label)
             notes = tuple(check(params, memory=False))
+            _check_kernel(params, kernels_checked)
         except GuardError as exc:
             raise CampaignError(f"{label}: {exc}") from None
         except ParameterError as exc:
             raise CampaignError(str(exc)) from None
         yield Run(index=index, params=params, swept=swept, notes=notes)
+
+
+def _check_kernel(params: Params, checked: dict) -> None:
+    """The compliance must be positive definite (tfm run refuses it before the run; a
+    campaign ran such files and failed each run at its start). One check per distinct
+    kernel and grid; the default kernel on the square grid needs none (and no engine
+    import, so that expanding a campaign stays fast)."""
+    key = kernel_check_key(params)
+    if key is None:
+        return
+    if key not in checked:
+        from ..operators import check_record
+
+        try:
+            check_record(params)
+            checked[key] = None
+        except ParameterError as exc:
+            checked[key] = str(exc)
+    if checked[key]:
+        raise ParameterError(checked[key])
 
 
 def _table(value: Any, label: str, where: str) -> dict[str, Any]:
