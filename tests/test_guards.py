@@ -246,3 +246,44 @@ def test_a_run_that_touched_at_a_few_springs_only_is_flagged():
     assert res.curve["n_contact"].max() < 4 * np.pi       # fewer than a disc of radius 2 spacings
     assert "the pull-off is erratic" in res.summary["warnings"]
     assert tfm.simulate(**kw, allow="coarse").summary["warnings"] == ""
+
+
+def test_theta_does_not_apply_where_the_tree_sums_exactly():
+    """theta with the local or neighbors kernel changed the run id, not one number."""
+    with pytest.raises(ParameterError, match="theta"):
+        Params.from_dict(dict(kernel="local", operator="tree", theta=0.2, k_th=0.02))
+
+
+def test_a_huge_sphere_is_the_paraboloid_to_round_off():
+    """R - sqrt(R^2 - r^2) cancelled: at R = 1e7 the apex was flat (69 springs at height 0)."""
+    from tfm.geometry import heights, make_layout
+
+    kw = dict(spacing=1 / 32, radius=1e7, max_indent=0.0625 / 1e7, step=0.0625 / 2e8, f_th=1e-9, alpha=0.0,
+              extent=0.5, allow="coarse")
+    p = Params.from_dict(dict(kw, shape="sphere"))
+    q = Params.from_dict(dict(kw, shape="paraboloid"))
+    lay = make_layout(p)
+    # the cap's exact height differs from the paraboloid's by r^4 / (8 R^3) < 1e-22 here
+    np.testing.assert_allclose(heights(p, lay), heights(q, lay), rtol=1e-12, atol=0)
+
+
+def test_height_maps_must_cover_where_the_layouts_springs_reach(tmp_path):
+    """Hexagonal rows reach ceil(hw / dy) dy > hw: validated as a square grid, the run
+    ended in a MapError traceback ('a spring lies outside the map')."""
+    m = tmp_path / "m.npy"
+    np.save(m, np.zeros((64, 64)))
+    kw = dict(shape="height_map", height_map=str(m), map_pixel_size="1/32", spacing="1/32", k_th=0.02,
+              max_indent=0.003, step=2e-4, operator="direct")
+    Params.from_dict(kw)
+    with pytest.raises(ParameterError, match="height_map: the map .* smaller than the grid"):
+        Params.from_dict(dict(kw, layout="hexagonal"))
+
+
+def test_the_memory_estimate_counts_the_neighbour_list():
+    """tree + neighbors builds a sparse list of pi m^2 neighbours a spring: 1313 MiB peak at
+    64 rings against an estimate of 431 MiB before (measured at 1/64)."""
+    from tfm.guards import estimate_memory
+
+    p = Params.from_dict(dict(spacing="1/64", k_th=0.02, kernel="neighbors", operator="tree", neighbor_rings=64,
+                              max_indent=0.05, step=2.5e-3))
+    assert estimate_memory(p) > 1313 * 2**20

@@ -110,6 +110,7 @@ def _shape_heights(p: Params, layout: Layout) -> np.ndarray:
     if p.shape == "flat_punch":
         # a rigid-ended cylinder of radius R: flat face at 0, nothing outside r = R
         return np.where(r2 <= R * R, 0.0, -np.inf)
-    # exact spherical cap; below the equator there is no surface facing the flat
+    # exact spherical cap; below the equator there is no surface facing the flat. Not as
+    # R - sqrt(R^2 - r^2), which cancels for R >> r (at R = 1e7 it flattened the apex)
     with np.errstate(invalid="ignore"):
-        return np.where(r2 <= R * R, -(R - np.sqrt(np.maximum(R * R - r2, 0.0))), -np.inf)
+        return np.where(r2 <= R * R, -r2 / (R + np.sqrt(np.maximum(R * R - r2, 0.0))), -np.inf)

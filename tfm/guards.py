@@ -105,6 +105,10 @@ BYTES_PER_FFT_CELL = 32.0
 # the whole-grid field's smaller boxes (config.FIELD_BOX_FRACTIONS): one real symbol each,
 # P x (P/2 + 1) doubles, 4 bytes a cell
 BYTES_PER_FIELD_CELL = 4.0
+# The tree operator's sparse neighbour list of the 'neighbors' kernel (building it holds
+# pairs, distances, both directions and a sort order): 68 bytes per directed entry,
+# measured at spacing 1/64 with 32 and 64 rings (769 and 1313 MiB peak), 2026-11-24.
+BYTES_PER_NEIGHBOUR = 70.0
 BASELINE_BYTES = 450e6     # measured 238 to 420 MiB after imports (and compilation)
 
 
@@ -125,6 +129,8 @@ def estimate_memory(p) -> float:
         total += BYTES_PER_FFT_CELL * P * P
         rungs = {_next_fast_len(math.ceil(f * P)) for f in FIELD_BOX_FRACTIONS}
         total += BYTES_PER_FIELD_CELL * sum(Q * Q for Q in rungs if Q < P)
+    if p.operator == "tree" and p.kernel == "neighbors":     # pi m^2 neighbours per spring
+        total += BYTES_PER_NEIGHBOUR * n * min(n, math.pi * (p.neighbor_rings + 0.5) ** 2)
     return total
 
 

@@ -376,7 +376,9 @@ APPLIES: dict[str, Applies] = {
                          lambda p: p.kernel != "local"),
     "neighbor_rings": Applies("kernel='neighbors'", lambda p: p.kernel == "neighbors"),
     "c_w": Applies("kernel='local'", lambda p: p.kernel == "local"),
-    "theta": Applies("operator='tree'", lambda p: p.operator == "tree"),
+    # the tree serves the long-range kernel only (local and neighbors sums are exact)
+    "theta": Applies("operator='tree' and kernel='boussinesq'",
+                     lambda p: p.operator == "tree" and p.kernel == "boussinesq"),
     "jitter": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
     "seed": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
     "extent_margin": Applies("extent is automatic (extent = none)", lambda p: p.extent is None),
@@ -708,7 +710,14 @@ def _validate_surface_relations(p: Params) -> None:
         from .surfaces import load_height_map, map_half_width, map_pixel
         hm = load_height_map(p.height_map)
         avail = map_half_width(p, hm)
+        # how far the layout's springs reach (tfm.geometry): hexagonal rows go to
+        # ceil(hw / dy) dy, jittered springs up to jitter spacings past their grid points
         need = math.ceil(hw / p.spacing - 1e-9) * p.spacing
+        if p.layout == "hexagonal":
+            dy = p.spacing * math.sqrt(3.0) / 2.0
+            need = max(hw, math.ceil(hw / dy - 1e-9) * dy)
+        elif p.layout == "jittered":
+            need += p.jitter * p.spacing
         if avail <= 0 or need > avail * (1 + 1e-9):
             nx, ny = hm.heights.shape
             raise ParameterError(f"height_map: the map ({nx} x {ny} pixels of {map_pixel(p, hm):g}) covers "
