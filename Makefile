@@ -3,7 +3,10 @@ PYTHON ?= python3
 NAME ?=
 JOBS ?= $(shell nproc 2>/dev/null || echo 1)
 
-.PHONY: install test test-slow run bench bench-quick bench-scale validate rough paper limit campaign campaigns clean
+.PHONY: help install test test-slow run bench bench-quick bench-scale validate rough paper limit campaign campaigns clean
+
+help:               ## this list
+	@grep -E '^[a-z-]+:.*##' Makefile | sed 's/:[^#]*## */\t/'
 
 install:            ## install tfm and its test dependencies (editable)
 	$(PYTHON) -m pip install -q -e ".[test]"

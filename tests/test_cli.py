@@ -319,3 +319,47 @@ def test_another_runs_checkpoint_is_not_discarded_without_overwrite(tmp_path, ca
     assert main([*other, "--overwrite"]) == 0
     assert "the run starts afresh" in capsys.readouterr().err
     assert not ckpt.exists() and out.exists()
+
+
+def test_a_table_written_by_another_run_meanwhile_is_not_replaced(tmp_path, monkeypatch, capsys):
+    """Two tfm run into one -o: the second to finish replaced the first's table though
+    neither had --overwrite. Now its table goes beside, named by its run id."""
+    import tfm.simulate  # noqa: F401  (the package attribute is the function)
+    sim_module = sys.modules["tfm.simulate"]
+
+    out = tmp_path / "same.parquet"
+    real = sim_module.simulate
+
+    def other_run_finishes_first(*a, **k):
+        res = real(*a, **k)
+        out.write_bytes(b"the other run's table")
+        return res
+
+    monkeypatch.setattr(sim_module, "simulate", other_run_finishes_first)
+    assert main(["run", *SMALL[:-1], "-o", str(out)]) == 0
+    assert "appeared while this run computed" in capsys.readouterr().err
+    assert out.read_bytes() == b"the other run's table"
+    p = Params.from_dict(read_metadata(next(tmp_path.glob("same.*.parquet")))["params"])
+    assert (tmp_path / f"same.{p.run_id}.parquet").exists() and (tmp_path / f"same.{p.run_id}.png").exists()
+
+
+def test_an_interrupted_run_says_what_survives_without_a_traceback(tmp_path, monkeypatch, capsys):
+    import tfm.simulate  # noqa: F401  (the package attribute is the function)
+    sim_module = sys.modules["tfm.simulate"]
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sim_module, "simulate", interrupted)
+    assert main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "--no-plot"]) == 130
+    assert "interrupted: no table written" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+
+
+def test_help_names_every_shape_and_make_help_lists_the_targets():
+    from tfm.cli import PARAM_HELP
+    from tfm.params import SHAPES
+
+    assert all(s in PARAM_HELP["shape"] for s in SHAPES)
+    out = subprocess.run(["make", "-s", "help"], cwd=REPO, capture_output=True, text=True)
+    assert out.returncode == 0 and "install" in out.stdout and "bench" in out.stdout

@@ -19,7 +19,7 @@ PARAM_HELP = {
     "k_th": "threshold parameter K_th (sets f_th to none)",
     "f_th": "explicit threshold force F_th",
     "radius": "radius R of the body",
-    "shape": "sphere | paraboloid | flat_punch",
+    "shape": "sphere | paraboloid | flat_punch | height_map",
     "kernel": "boussinesq | local | neighbors",
     "self_term": "C_ii = self_term / sqrt(A) (the paper's 3.8)",
     "neighbor_rings": "kernel=neighbors: keep 1/r for r <= m * spacing",
@@ -231,8 +231,21 @@ def _run_and_write(args, p: Params, notes, out: Path, ckpt: dict):
     if res.provenance.get("resumed_at_step") and not args.quiet:
         print(f"continued from the checkpoint {ckpt['checkpoint']} at step {res.provenance['resumed_at_step']} "
               "(the steps before were computed by the run that was stopped)", file=sys.stderr)
+    out = _appeared(out, args, p.run_id)
     res.write_curve(out)
-    return res
+    return res, out
+
+
+def _appeared(path: Path | None, args, run_id: str) -> Path | None:
+    """An output that another process wrote while this run computed (it was checked free
+    before the run) is not replaced without --overwrite: this run's goes beside it, named
+    by its run id."""
+    if path is None or args.overwrite or not path.exists():
+        return path
+    alt = path.with_name(f"{path.stem}.{run_id}{path.suffix}")
+    print(f"tfm: warning: {path} appeared while this run computed (another tfm run?); "
+          f"writing this run's to {alt} instead", file=sys.stderr)
+    return alt
 
 
 def cmd_run(args) -> int:
@@ -246,11 +259,13 @@ def cmd_run(args) -> int:
     # the figure's worker imports and warms up while this process loads the engine and runs
     worker = start_worker(p) if plot_path is not None else None
     try:
-        res = _run_and_write(args, p, notes, out, ckpt)
+        res, out = _run_and_write(args, p, notes, out, ckpt)
     except BaseException:
         if worker is not None:
             worker.cancel()
         raise
+    if plot_path is not None:             # a default figure follows a diverted table
+        plot_path = out.with_suffix(".png") if args.plot is None else _appeared(plot_path, args, p.run_id)
     if plot_path is not None:
         failed = worker.draw(out, plot_path) if worker is not None else None
         if failed:
@@ -283,7 +298,9 @@ def build_parser() -> argparse.ArgumentParser:
                                      "like 1/64 are accepted. Outputs are checked before the run; "
                                      "nothing is replaced without --overwrite. Exit status 2: bad "
                                      "input or output; 3: a suspect run (grid edge reached, solver "
-                                     "not converged, auto preload capped).")
+                                     "not converged, rounds or unloading steps capped, fewer springs "
+                                     "in contact than a disc of radius 2 spacings, auto preload "
+                                     "capped); 130: interrupted.")
     _add_param_flags(run)
     run.add_argument("-o", "--output", default=None, metavar="FILE.parquet",
                      help="curve table (default results/runs/<run_id>/curve.parquet)")
@@ -324,6 +341,20 @@ def main(argv=None) -> int:
     except ParameterError as exc:
         print(f"tfm: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        if args.func is not cmd_run:
+            raise
+        # no traceback for a Ctrl-C; say what survives (the table is written only at the end)
+        out = Path(args.output) if args.output else None
+        ckpt = checkpoint_path_for(out) if out is not None else None
+        if ckpt is None:
+            kept = "; a checkpoint beside the default table, if one was saved, lets the same command continue"
+        elif ckpt.exists():
+            kept = f"; its last checkpoint {ckpt} lets the same command continue"
+        else:
+            kept = "; no checkpoint was saved yet (--checkpoint-every SECONDS saves more often)"
+        print(f"tfm: interrupted: no table written{kept}", file=sys.stderr)
+        return 130
     finally:
         if argv is None:
             # Python's last collection at exit walks every object again: 0.3 s of a 2.4 s
