@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 
 from .config import FIELD_BOX_FRACTIONS
-from .params import ParameterError
+from .params import ParameterError, Params
 
 MIN_SPRINGS_ACROSS_RADIUS = 2.0
 MIN_LOADING_STEPS = 10
@@ -168,15 +168,10 @@ def kernel_check_key(p) -> tuple | None:
         return None                                   # a positive diagonal
     kernel = (p.kernel, p.self_term, p.neighbor_rings if p.kernel == "neighbors" else None)
     if p.layout == "square":
-        if p.kernel == "boussinesq" and p.self_term == _default_self_term():
+        if p.kernel == "boussinesq" and p.self_term == Params.self_term:   # the field's default
             return None
         return (*kernel, "square", math.ceil(p.half_width / p.spacing - 1e-9))
     return (*kernel, p.layout, p.jitter, p.seed, p.spacing, p.half_width)
-
-
-def _default_self_term() -> float:
-    from .params import Params
-    return Params.__dataclass_fields__["self_term"].default
 
 
 def _allowed(p) -> set[str]:

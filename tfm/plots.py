@@ -254,13 +254,9 @@ def draw_reference(ax1, ax2, p, dmax):
     if label is None:
         return
     delta = np.linspace(0, dmax, 200)
-    if p.shape == "flat_punch":
-        P = theory.flat_punch_force(delta, p.radius)
-        a = np.full_like(delta, p.radius)
-    else:
-        P = theory.hertz_force(delta, p.radius)
-        a = theory.hertz_radius(delta, p.radius)
-    P = P * force_scale(p)            # theory is in paper units; SI: L* = 1 m keeps the lengths
+    # theory is in paper units; SI: L* = 1 m keeps the lengths
+    P = theory.preload_force(p.shape, delta, p.radius) * force_scale(p)
+    a = np.full_like(delta, p.radius) if p.shape == "flat_punch" else theory.hertz_radius(delta, p.radius)
     ax1.plot(delta, P, "k--", lw=0.8, label=label)
     ax2.plot(P, a, "k--", lw=0.8, label=label if p.shape != "flat_punch" else None)
 

@@ -131,8 +131,8 @@ def _need_fields(path, fields, params):
     except (OSError, KeyError) as exc:
         raise ViewError(f"{fields}: not a readable field snapshots file ({exc})") from None
     # Another run's snapshots left beside the table (a rerun to the same -o without any)
-    # would be drawn with this curve. An SI run's file may hold its paper-units twin's
-    # run id (tfm.units.to_paper) until the writer records the SI run's own: accept both.
+    # would be drawn with this curve. An SI run's file written before the writer recorded
+    # the SI record holds its paper-units twin's run id (tfm.units.to_paper): accept both.
     table_id = read_metadata(path).get("run_id")
     ours = {table_id} | ({params.run_id, to_paper(params).run_id} if params is not None else set())
     ours.discard(None)
@@ -143,7 +143,7 @@ def _need_fields(path, fields, params):
         raise ViewError(f"{fields} holds {held}, not of run {table_id or params.run_id} in {path}: "
                         "stale, from an earlier run; rerun this one with --snapshots events")
     if params is not None:
-        out.use_force_scale(force_scale(params))      # paper units on file; an SI curve is in N
+        out.use_force_scale(force_scale(params))      # forces in the table's units (SI: N)
     return out
 
 
