@@ -328,6 +328,14 @@ def main(argv=None) -> int:
     after it."""
     import gc
 
+    if argv is None and "numpy" not in sys.modules:
+        # OpenBLAS starts a thread per core as NumPy, and again as SciPy (which Numba
+        # imports), load it, and each thread spins about 0.1 s before it sleeps: 0.3 s of
+        # CPU taken from the figure's worker in a 1.5 s `tfm run` at 1/128 on 2 cores, for
+        # no work (2026-11-24). tfm's dense algebra is small: the largest, an eigenvalue
+        # check of 1200 springs, took 0.10 s on one thread against 0.08 s on two. Child
+        # processes (figure, campaign workers) inherit the setting; a user's value stands.
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     parser = build_parser()
     args = parser.parse_args(argv)
     if argv is None and args.func is cmd_run:
