@@ -10,7 +10,7 @@ from .geometry import heights, make_layout
 from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
 from .params import ParameterError, Params
-from .results import RunResult, curve_frame, provenance, summarize
+from .results import RunResult, curve_columns, provenance, summarize
 from .solver import Problem
 from .threshold import threshold_forces
 from .units import to_paper, to_si_curve, to_si_summary, unit_labels
@@ -85,7 +85,7 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
 
     try:
         out = protocol.run(q, prob, observe, ckpt)
-        curve = curve_frame(out.steps)
+        curve = curve_columns(out.steps)
         summary = summarize(curve, out, q, layout.n, layout.shape[0] if layout.shape else None)
         if p.units == "si":
             curve, summary = to_si_curve(curve, p), to_si_summary(summary, p)
