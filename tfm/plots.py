@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib import rc_context
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator, ScalarFormatter
 
@@ -54,8 +55,15 @@ INDENT_LABEL = indent_label()
 
 
 # ---- shared helpers -----------------------------------------------------------
-def figure(ncols=1, nrows=1, height=2.8, width=WIDTH):
-    fig = Figure(figsize=(width, height), layout="constrained")
+def figure(ncols=1, nrows=1, height=2.8, width=WIDTH, reuse=None):
+    """A new figure, or ``reuse`` (an earlier one of the same size) cleared: its renderer
+    then keeps the text measurements and parsed math text of what it drew before."""
+    if reuse is not None and tuple(reuse.get_size_inches()) == (width, height):
+        fig = reuse
+        fig.clear()
+    else:
+        fig = Figure(figsize=(width, height), layout="constrained")
+        FigureCanvasAgg(fig)        # its own canvas: savefig keeps its renderer
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     return fig, list(axes)
 
@@ -263,11 +271,11 @@ def draw_reference(ax1, ax2, p, dmax):
 
 # ---- one run ------------------------------------------------------------------
 @styled
-def plot_curve(curve, params=None, path=None, title=None, hertz=True):
+def plot_curve(curve, params=None, path=None, title=None, hertz=True, reuse=None):
     """Two panels: (a) force against indentation, (b) contact radius against force;
     loading blue, unloading red, the final snap-off as a jump, with the analytical
     reference for the run's shape (Hertz, or Boussinesq's flat punch) dashed."""
-    fig, (ax1, ax2) = figure(2)
+    fig, (ax1, ax2) = figure(2, reuse=reuse)
     draw_branches(ax1, ax2, curve)
     if hertz and params is not None:
         draw_reference(ax1, ax2, params, float(curve["indent"].max()))
@@ -279,7 +287,7 @@ def plot_curve(curve, params=None, path=None, title=None, hertz=True):
     return _save(fig, path)
 
 
-def write_curve_figure(curve, params, path) -> Path:
+def write_curve_figure(curve, params, path, reuse=None) -> Path:
     """``plot_curve`` saved through a temporary name beside ``path``: an interrupted save
     leaves no half-written figure, and no stray temporary file."""
     import os
@@ -287,7 +295,7 @@ def write_curve_figure(curve, params, path) -> Path:
     path = Path(path)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
     try:
-        plot_curve(curve, params, tmp)
+        plot_curve(curve, params, tmp, reuse=reuse)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
@@ -517,7 +525,7 @@ def plot_load_unload(curve, radius, k_ic=None, path=None, title=None):
     """Paper Fig. 3: ``plot_curve``'s two panels (loading blue, unloading red, the final
     snap-off as a jump), Hertz dashed and, given the effective toughness ``k_ic``, the JKR
     curve dotted (its receding branch, a up to the preload radius). The body is a paraboloid."""
-    fig, (ax1, ax2) = figure(2)
+    fig, (ax1, ax2) = figure(2, reuse=reuse)
     draw_branches(ax1, ax2, curve)
     dmax = float(curve["indent"].max())
     delta = np.linspace(0, dmax, 300)
