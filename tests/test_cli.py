@@ -5,6 +5,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pandas as pd
@@ -208,6 +209,40 @@ def test_a_failed_write_leaves_no_temporary_file(tmp_path, monkeypatch):
     monkeypatch.setattr(pq, "write_table", broken)
     with pytest.raises(OSError, match="No space"):
         main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "--no-plot"])
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failed_write_leaves_no_figure_of_the_worker(tmp_path, monkeypatch):
+    """The figure's worker draws while the table is written (tfm.plot_worker): if the
+    write fails, its figure must not be left, under any name, nor its process."""
+    import pyarrow.parquet as pq
+
+    from tfm import plot_worker
+
+    started = []
+    real_start = plot_worker.start_worker
+    monkeypatch.setattr(plot_worker, "start_worker", lambda p: started.append(real_start(p)) or started[-1])
+    sent, drawn = [], []
+    real_send = plot_worker.PlotWorker.send
+
+    def send_and_wait(self, res, plot):
+        real_send(self, res, plot)
+        sent.append(self.tmp)
+        for _ in range(600):                  # until the worker has drawn its figure
+            if self.tmp.exists() and self.tmp.stat().st_size > 0:
+                break
+            time.sleep(0.05)
+        drawn.append(self.tmp.exists())
+
+    monkeypatch.setattr(plot_worker.PlotWorker, "send", send_and_wait)
+
+    def broken(table, where, **kw):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(pq, "write_table", broken)
+    with pytest.raises(OSError, match="No space"):
+        main(["run", *SMALL, "-o", str(tmp_path / "c.parquet")])
+    assert sent and drawn == [True] and started[0].proc.returncode is not None
     assert list(tmp_path.iterdir()) == []
 
 

@@ -203,8 +203,10 @@ def checkpoint_path_for(curve_path: Path) -> Path:
     return curve_path.with_name(curve_path.stem + ".checkpoint.npz")
 
 
-def _run_and_write(args, p: Params, notes, out: Path, ckpt: dict):
-    """`tfm run` from the announcement to the written table."""
+def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: dict, worker):
+    """`tfm run` from the announcement to the written table; the figure's ``worker`` (or
+    None) gets the curve first and draws it while the table is written. Returns the
+    result and the table's and figure's paths."""
     import warnings
 
     from .guards import estimate_memory
@@ -232,8 +234,12 @@ def _run_and_write(args, p: Params, notes, out: Path, ckpt: dict):
         print(f"continued from the checkpoint {ckpt['checkpoint']} at step {res.provenance['resumed_at_step']} "
               "(the steps before were computed by the run that was stopped)", file=sys.stderr)
     out = _appeared(out, args, p.run_id)
+    if plot is not None:                  # a default figure follows a diverted table
+        plot = out.with_suffix(".png") if args.plot is None else _appeared(plot, args, p.run_id)
+    if worker is not None and plot is not None:
+        worker.send(res, plot)
     res.write_curve(out)
-    return res, out
+    return res, out, plot
 
 
 def _appeared(path: Path | None, args, run_id: str) -> Path | None:
@@ -259,15 +265,13 @@ def cmd_run(args) -> int:
     # the figure's worker imports and warms up while this process loads the engine and runs
     worker = start_worker(p) if plot_path is not None else None
     try:
-        res, out = _run_and_write(args, p, notes, out, ckpt)
+        res, out, plot_path = _run_and_write(args, p, notes, out, plot_path, ckpt, worker)
     except BaseException:
         if worker is not None:
             worker.cancel()
         raise
-    if plot_path is not None:             # a default figure follows a diverted table
-        plot_path = out.with_suffix(".png") if args.plot is None else _appeared(plot_path, args, p.run_id)
     if plot_path is not None:
-        failed = worker.draw(out, plot_path) if worker is not None else None
+        failed = worker.finish() if worker is not None else None
         if failed:
             print(f"tfm: note: the figure's worker process failed ({failed}); drawing the figure here",
                   file=sys.stderr)

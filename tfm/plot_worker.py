@@ -3,11 +3,13 @@
 Matplotlib, pandas and a figure's first drawing (fonts, the math-text parser) take about as
 long as a 1/128 curve, and such a curve runs on one core. So `tfm run` starts this worker
 before the run. The worker imports and draws a throwaway figure meanwhile, then waits for
-one line on stdin, ``{"table": ..., "plot": ...}``, and draws the figure from the written
-table exactly as `tfm plot` does (the table holds the curve and the parameter record).
-Without that line (the run failed or was interrupted) it exits without drawing. It answers
-``done`` on stdout once the figure is in place; anything else (a failure is reported on
-stderr) and `tfm run` draws the figure itself.
+one line on stdin: the curve's columns and a temporary path for the figure, sent as soon
+as the curve is computed. It draws the figure there exactly as `tfm plot` would from the
+table (the same columns, the run's parameter record), while `tfm run` writes the table,
+then answers ``done`` on stdout, and `tfm run` moves the figure into place once the table
+is written. Without that line (the run failed or was interrupted) it exits without
+drawing. On any other answer (a failure is reported on stderr) `tfm run` draws the figure
+itself.
 """
 from __future__ import annotations
 
@@ -47,34 +49,48 @@ class PlotWorker:
     def __init__(self, params_json: str):
         self.proc = subprocess.Popen((*self.command, params_json), stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.plot = self.tmp = None
+        self.failed = None
 
-    def _finish(self, line: str) -> tuple[str, str]:
+    def send(self, res, plot: Path) -> None:
+        """Have the curve of ``res`` (a RunResult) drawn for ``plot``: into a temporary file
+        beside it, which ``finish`` moves into place."""
+        self.plot = Path(plot)
+        self.tmp = self.plot.with_name(f".{self.plot.stem}.{os.getpid()}.worker{self.plot.suffix}")
+        columns = {c: v.tolist() for c, v in res.columns().items()}
         try:
-            return self.proc.communicate(line, timeout=WAIT)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.communicate()
-            return "", f"no answer after {WAIT:g} s"
-
-    def draw(self, table: Path, plot: Path) -> str | None:
-        """Have the figure of ``table`` written to ``plot``: None once it is there, else
-        why not."""
-        try:
-            out, err = self._finish(json.dumps({"table": str(table), "plot": str(plot)}) + "\n")
+            self.proc.stdin.write(json.dumps({"columns": columns, "plot": str(self.tmp)}) + "\n")
+            self.proc.stdin.flush()
         except OSError as exc:                 # it died before reading its line
-            self.proc.kill()
-            self.proc.communicate()
-            return str(exc)
-        if out.strip() == DONE and self.proc.returncode == 0:
-            return None
-        lines = (err or "").strip().splitlines()
-        return lines[-1] if lines else f"exit status {self.proc.returncode}"
+            self.failed = str(exc)
+
+    def finish(self) -> str | None:
+        """Wait for the figure sent and move it into place: None once it is there, else
+        why not (nothing of it is left then)."""
+        if self.failed is None:
+            try:
+                out, err = self.proc.communicate(timeout=WAIT)
+            except subprocess.TimeoutExpired:
+                out, err = "", f"no answer after {WAIT:g} s"
+            except OSError as exc:
+                out, err = "", str(exc)
+            if out.strip() == DONE and self.proc.returncode == 0:
+                os.replace(self.tmp, self.plot)
+                return None
+            lines = (err or "").strip().splitlines()
+            self.failed = lines[-1] if lines else f"exit status {self.proc.returncode}"
+        self.cancel()
+        return self.failed
 
     def cancel(self) -> None:
-        """No figure (the run failed or was interrupted): end the worker now. It has
-        written nothing, and a failed run must not wait for its warm-up."""
-        self.proc.kill()
-        self.proc.communicate()
+        """No figure from the worker (the run failed or was interrupted, or the worker
+        did): end it now, and remove anything it drew. A failed run must not wait for its
+        warm-up."""
+        if self.proc.returncode is None:
+            self.proc.kill()
+            self.proc.communicate()
+        if self.tmp is not None:
+            self.tmp.unlink(missing_ok=True)
 
 
 def _warm(params_json: str):
@@ -122,14 +138,13 @@ def main(params_json: str) -> int:
     if not line.strip():
         return 0
     job = json.loads(line)
-    from .plots import write_curve_figure
-    from .viewcli import load_run
+    from .params import Params
+    from .plots import plot_curve
+    from .results import curve_frame
 
-    table = Path(job["table"])
-    curve, params, _ = load_run(table)
-    if params is None:               # tfm run would draw it with the caption: let it
-        raise ValueError(f"{table}: the parameter record did not rebuild")
-    write_curve_figure(curve, params, Path(job["plot"]), reuse=fig)
+    params = Params.from_dict(json.loads(params_json))
+    # the figure `tfm plot` would draw from the table: the same columns and record
+    plot_curve(curve_frame(job["columns"]), params, Path(job["plot"]), reuse=fig)
     return 0
 
 

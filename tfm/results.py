@@ -85,6 +85,14 @@ class RunResult:
     def curve(self, value) -> None:
         self._curve = value
 
+    def columns(self) -> dict[str, Any]:
+        """The curve as NumPy columns (CURVE_COLUMNS), without making a DataFrame."""
+        import numpy as np
+
+        if isinstance(self._curve, dict):
+            return dict(self._curve)
+        return {c: self._curve[c].to_numpy(dtype=object if c == "phase" else None) for c in CURVE_COLUMNS}
+
     def __repr__(self) -> str:
         return (f"RunResult(run_id={self.params.run_id!r}, steps={self.summary.get('n_steps')}, "
                 f"pull_off_force={self.summary.get('pull_off_force')!r})")
