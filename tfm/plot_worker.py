@@ -128,7 +128,6 @@ def _warm(params_json: str):
         curve["contact_radius"] = np.sqrt(np.abs(indent) * p.radius)
     with tempfile.TemporaryDirectory() as tmp:
         fig = plot_curve(curve, p, Path(tmp) / "warm.png")
-    import pyarrow.parquet  # noqa: F401  (the table is read with it)
     return fig
 
 
