@@ -43,6 +43,21 @@ CASES = {
 }
 
 
+def test_the_paper_figures_draw_a_curve(tmp_path):
+    """`tfm paper` draws Figs. 2-5 only after all its campaigns: a figure function that
+    raises (as plot_load_unload once did, on a name from plot_curve's signature) would
+    be found hours in. Each must draw the curve it is given."""
+    res = tfm.simulate(spacing=1 / 32, k_th=0.02, shape="paraboloid", max_indent=0.02, step=5e-4)
+    curve, r = res.curve, res.params.radius
+    figs = {"load_unload": plots.plot_load_unload(curve, r, k_ic=0.1, path=tmp_path / "3.png"),
+            "hertz": plots.plot_hertz_validation({1 / 32: curve}, r, path=tmp_path / "2.png"),
+            "refinement": plots.plot_refinement({1 / 32: curve}, r, k_ic=0.1, path=tmp_path / "4.png")}
+    for name, fig in figs.items():
+        drawn = [line for ax in fig.axes for line in ax.get_lines() if len(line.get_xdata()) >= 10]
+        assert drawn, name
+    assert all((tmp_path / f"{k}.png").stat().st_size > 10_000 for k in (2, 3, 4))
+
+
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_default_figure_renders_without_faults(case, tmp_path):
     res = tfm.simulate(**CASES[case])

@@ -525,7 +525,7 @@ def plot_load_unload(curve, radius, k_ic=None, path=None, title=None):
     """Paper Fig. 3: ``plot_curve``'s two panels (loading blue, unloading red, the final
     snap-off as a jump), Hertz dashed and, given the effective toughness ``k_ic``, the JKR
     curve dotted (its receding branch, a up to the preload radius). The body is a paraboloid."""
-    fig, (ax1, ax2) = figure(2, reuse=reuse)
+    fig, (ax1, ax2) = figure(2)
     draw_branches(ax1, ax2, curve)
     dmax = float(curve["indent"].max())
     delta = np.linspace(0, dmax, 300)
