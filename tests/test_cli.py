@@ -454,3 +454,117 @@ def test_help_names_every_shape_and_make_help_lists_the_targets():
     assert all(s in PARAM_HELP["shape"] for s in SHAPES)
     out = subprocess.run(["make", "-s", "help"], cwd=REPO, capture_output=True, text=True)
     assert out.returncode == 0 and "install" in out.stdout and "bench" in out.stdout
+
+
+def test_a_default_figure_written_by_another_run_meanwhile_is_not_replaced(tmp_path, monkeypatch, capsys):
+    """The table was diverted when another run wrote it meanwhile, but the default figure
+    beside it (not given by --plot) was replaced without a word."""
+    import tfm.simulate  # noqa: F401  (the package attribute is the function)
+    sim_module = sys.modules["tfm.simulate"]
+
+    out = tmp_path / "same.parquet"
+    real = sim_module.simulate
+
+    def other_figure_appears(*a, **k):
+        res = real(*a, **k)
+        out.with_suffix(".png").write_bytes(b"the other run's figure")
+        return res
+
+    monkeypatch.setattr(sim_module, "simulate", other_figure_appears)
+    assert main(["run", *SMALL[:-1], "-o", str(out)]) == 0
+    assert "appeared while this run computed" in capsys.readouterr().err
+    assert out.with_suffix(".png").read_bytes() == b"the other run's figure" and out.exists()
+    p = Params.from_dict(read_metadata(out)["params"])
+    assert (tmp_path / f"same.{p.run_id}.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def _watch_worker(monkeypatch):
+    from tfm import plot_worker
+
+    started = []
+    real_start = plot_worker.start_worker
+    monkeypatch.setattr(plot_worker, "start_worker", lambda p: started.append(real_start(p)) or started[-1])
+    return started
+
+
+def test_a_worker_that_does_not_read_holds_up_neither_table_nor_figure(tmp_path, monkeypatch, capsys):
+    """The curve goes to the figure's worker before the table is written; a curve of 500
+    steps and more is longer than a pipe's buffer, and a worker that does not read (here:
+    never) held `tfm run` before its table, for as long as it did not read. Now the table is
+    written, and after WAIT seconds tfm run draws the figure itself."""
+    from tfm import plot_worker
+
+    monkeypatch.setattr(plot_worker, "WAIT", 3.0)
+    monkeypatch.setattr(plot_worker.PlotWorker, "command", (sys.executable, "-c", "import time; time.sleep(300)"))
+    started = _watch_worker(monkeypatch)
+    out = tmp_path / "c.parquet"
+    args = ["run", *SMALL[:-3], "--step", "2e-5", "-q", "-o", str(out)]     # 2000 steps, a 200 kB line
+    assert main(args) == 0
+    assert "worker process failed (no answer after 3 s); drawing the figure here" in capsys.readouterr().err
+    assert read_metadata(out)["summary"]["n_steps"] > 1000
+    assert (tmp_path / "c.png").read_bytes()[:4] == b"\x89PNG"
+    assert started[0].proc.returncode is not None and not list(tmp_path.glob(".*"))
+
+
+def test_an_interruption_after_the_table_says_so_and_leaves_no_figure_behind(tmp_path, monkeypatch, capsys):
+    """Ctrl-C while tfm run waits for its figure: the worker's file was left under a hidden
+    temporary name, and the message said that no table was written."""
+    from tfm import plot_worker
+
+    def interrupted(self):
+        for _ in range(600):                       # until the worker has drawn its figure
+            if self.tmp.exists() and self.tmp.stat().st_size > 0:
+                break
+            time.sleep(0.05)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plot_worker.PlotWorker, "finish", interrupted)
+    started = _watch_worker(monkeypatch)
+    out = tmp_path / "c.parquet"
+    assert main(["run", *SMALL, "-o", str(out)]) == 130
+    assert f"the table {out} was written, the figure was not" in capsys.readouterr().err
+    assert out.exists() and started[0].proc.returncode is not None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.parquet"]
+
+
+def test_write_table_keeps_every_numpy_column_type():
+    """Columns are written from their buffers without pandas (tfm.results.arrow_column);
+    booleans (bits in Arrow), big-endian numbers and NumPy strings must survive too."""
+    import numpy as np
+
+    from tfm.results import write_table
+
+    n = 9
+    cols = {"b": np.array([True, False, True, False, False, True, True, True, False]),
+            "big": np.arange(n, dtype=">f8") + 0.5, "i32": np.arange(n, dtype=np.int32),
+            "u": np.array(["load"] * 4 + ["unload"] * 5), "o": np.array(["x"] * n, dtype=object),
+            "f": np.linspace(0.0, 1.0, n)}
+    with __import__("tempfile").TemporaryDirectory() as tmp:
+        df = pd.read_parquet(write_table(cols, Path(tmp) / "t.parquet"))
+    for name, values in cols.items():
+        assert df[name].tolist() == values.tolist(), name
+
+
+def test_a_run_result_pickled_by_the_dataclass_version_still_loads(tmp_path):
+    """RunResult was a dataclass with a ``curve`` field until its curve became NumPy
+    columns made into a DataFrame on demand: its pickles (a campaign's results in flight)
+    must still give the curve and write their table."""
+    import pickle
+
+    from tfm import simulate
+    from tfm.results import RunResult
+
+    res = simulate(_params_from(SMALL))
+    old = RunResult.__new__(RunResult)
+    old.__dict__.update(params=res.params, curve=res.curve, summary=res.summary, provenance=res.provenance,
+                        fields_path=None)            # the dataclass's fields, as its pickle held them
+    loaded = pickle.loads(pickle.dumps(old))
+    pd.testing.assert_frame_equal(loaded.curve, res.curve)
+    loaded.write_curve(tmp_path / "old.parquet")
+    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "old.parquet"), res.curve)
+
+
+def _params_from(argv):
+    from tfm.cli import _params_from_args, build_parser
+
+    return _params_from_args(build_parser().parse_args(["run", *argv]))

@@ -235,10 +235,11 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
               "(the steps before were computed by the run that was stopped)", file=sys.stderr)
     out = _appeared(out, args, p.run_id)
     if plot is not None:                  # a default figure follows a diverted table
-        plot = out.with_suffix(".png") if args.plot is None else _appeared(plot, args, p.run_id)
+        plot = _appeared(out.with_suffix(".png") if args.plot is None else plot, args, p.run_id)
     if worker is not None and plot is not None:
         worker.send(res, plot)
     res.write_curve(out)
+    args.written = out                    # for the message of an interruption from here on
     return res, out, plot
 
 
@@ -266,12 +267,12 @@ def cmd_run(args) -> int:
     worker = start_worker(p) if plot_path is not None else None
     try:
         res, out, plot_path = _run_and_write(args, p, notes, out, plot_path, ckpt, worker)
+        failed = worker.finish() if worker is not None and plot_path is not None else None
     except BaseException:
         if worker is not None:
             worker.cancel()
         raise
     if plot_path is not None:
-        failed = worker.finish() if worker is not None else None
         if failed:
             print(f"tfm: note: the figure's worker process failed ({failed}); drawing the figure here",
                   file=sys.stderr)
@@ -369,6 +370,11 @@ def main(argv=None) -> int:
         if args.func is not cmd_run:
             raise
         # no traceback for a Ctrl-C; say what survives (the table is written only at the end)
+        written = getattr(args, "written", None)
+        if written is not None:
+            print(f"tfm: interrupted: the table {written} was written, the figure was not "
+                  f"(tfm plot {written} draws it)", file=sys.stderr)
+            return 130
         out = Path(args.output) if args.output else None
         ckpt = checkpoint_path_for(out) if out is not None else None
         if ckpt is None:

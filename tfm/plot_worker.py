@@ -17,6 +17,8 @@ import json
 import os
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 # seconds `tfm run` waits for the figure once the table is written (then it draws it itself)
@@ -49,33 +51,45 @@ class PlotWorker:
     def __init__(self, params_json: str):
         self.proc = subprocess.Popen((*self.command, params_json), stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        self.plot = self.tmp = None
+        self.plot = self.tmp = self._writer = None
         self.failed = None
 
     def send(self, res, plot: Path) -> None:
         """Have the curve of ``res`` (a RunResult) drawn for ``plot``: into a temporary file
-        beside it, which ``finish`` moves into place."""
+        beside it, which ``finish`` moves into place. The line is written by a thread: a
+        curve of some 500 steps and more is longer than the pipe's buffer, and a worker
+        that does not read (stopped, or still warming up) must not hold up the table."""
         self.plot = Path(plot)
         self.tmp = self.plot.with_name(f".{self.plot.stem}.{os.getpid()}.worker{self.plot.suffix}")
-        columns = {c: v.tolist() for c, v in res.columns().items()}
+        line = json.dumps({"columns": {c: v.tolist() for c, v in res.columns().items()},
+                           "plot": str(self.tmp)}) + "\n"
+        self._writer = threading.Thread(target=self._write, args=(line,), daemon=True)
+        self._writer.start()
+
+    def _write(self, line: str) -> None:
         try:
-            self.proc.stdin.write(json.dumps({"columns": columns, "plot": str(self.tmp)}) + "\n")
+            self.proc.stdin.write(line)
             self.proc.stdin.flush()
-        except OSError as exc:                 # it died before reading its line
-            self.failed = str(exc)
+        except (OSError, ValueError) as exc:   # it died, or was ended, before reading it all
+            self.failed = self.failed or str(exc)
 
     def finish(self) -> str | None:
-        """Wait for the figure sent and move it into place: None once it is there, else
-        why not (nothing of it is left then)."""
+        """Wait, at most WAIT seconds, for the figure sent and move it into place: None
+        once it is there, else why not (nothing of it is left then)."""
+        deadline = time.monotonic() + WAIT
+        self._writer.join(WAIT)
+        if self._writer.is_alive():
+            self.failed = f"no answer after {WAIT:g} s"
         if self.failed is None:
             try:
-                out, err = self.proc.communicate(timeout=WAIT)
+                out, err = self.proc.communicate(timeout=max(deadline - time.monotonic(), 0.0))
             except subprocess.TimeoutExpired:
                 out, err = "", f"no answer after {WAIT:g} s"
             except OSError as exc:
                 out, err = "", str(exc)
             if out.strip() == DONE and self.proc.returncode == 0:
                 os.replace(self.tmp, self.plot)
+                self.tmp = None
                 return None
             lines = (err or "").strip().splitlines()
             self.failed = lines[-1] if lines else f"exit status {self.proc.returncode}"
@@ -88,7 +102,14 @@ class PlotWorker:
         warm-up."""
         if self.proc.returncode is None:
             self.proc.kill()
-            self.proc.communicate()
+            self.proc.wait()
+        if self._writer is not None:
+            self._writer.join(5.0)         # a write to the dead process fails at once
+        for pipe in (self.proc.stdin, self.proc.stdout, self.proc.stderr):
+            try:
+                pipe.close()
+            except (OSError, ValueError):
+                pass
         if self.tmp is not None:
             self.tmp.unlink(missing_ok=True)
 

@@ -93,6 +93,12 @@ class RunResult:
             return dict(self._curve)
         return {c: self._curve[c].to_numpy(dtype=object if c == "phase" else None) for c in CURVE_COLUMNS}
 
+    def __setstate__(self, state: dict) -> None:
+        if "curve" in state:                # pickled when RunResult was a dataclass
+            state["_curve"] = state.pop("curve")
+        state.setdefault("_fields_placed", False)
+        self.__dict__.update(state)
+
     def __repr__(self) -> str:
         return (f"RunResult(run_id={self.params.run_id!r}, steps={self.summary.get('n_steps')}, "
                 f"pull_off_force={self.summary.get('pull_off_force')!r})")
@@ -236,20 +242,24 @@ def _json_default(obj):
 
 
 def arrow_column(values):
-    """A NumPy column (numbers, or strings as objects) as an Arrow array of the type pandas
-    would have written. Made from its buffers: ``pyarrow.array`` imports pandas to probe
-    its argument, and pandas is what writing a table without it saves."""
+    """A NumPy column as an Arrow array of the type pandas would have written. Numbers and
+    strings (as objects) are made from their buffers: ``pyarrow.array`` imports pandas to
+    probe its argument, and pandas is what writing a table without it saves. Any other
+    column (booleans, say, which Arrow packs as bits) goes through ``pyarrow.array``."""
     import numpy as np
     import pyarrow as pa
 
-    if values.dtype == object:
-        data = [str(v).encode() for v in values]
+    values = np.asarray(values)
+    if values.dtype.kind == "U" or (values.dtype == object and all(isinstance(v, str) for v in values)):
+        data = [v.encode() for v in values.tolist()]
         offsets = np.zeros(len(data) + 1, dtype=np.int64)
         np.cumsum([len(b) for b in data], out=offsets[1:])
         return pa.Array.from_buffers(pa.large_string(), len(data),
                                      [None, pa.py_buffer(offsets), pa.py_buffer(b"".join(data))])
-    values = np.ascontiguousarray(values)
-    return pa.Array.from_buffers(pa.from_numpy_dtype(values.dtype), values.size, [None, pa.py_buffer(values)])
+    if values.dtype.kind in "iuf" and values.ndim == 1:
+        values = np.ascontiguousarray(values, dtype=values.dtype.newbyteorder("="))
+        return pa.Array.from_buffers(pa.from_numpy_dtype(values.dtype), values.size, [None, pa.py_buffer(values)])
+    return pa.array(values, type=pa.large_string() if values.dtype == object else None)
 
 
 def write_table(df, path, params: Params | None = None, prov=None, summary=None,
