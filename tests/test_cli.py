@@ -568,3 +568,24 @@ def _params_from(argv):
     from tfm.cli import _params_from_args, build_parser
 
     return _params_from_args(build_parser().parse_args(["run", *argv]))
+
+
+def test_provenance_leaves_the_users_git_index_alone(tmp_path):
+    """A run's provenance asks git whether the checkout is dirty. Plain `git status`
+    rewrites a stale index under .git/index.lock; a run killed meanwhile left the lock,
+    and every git command in the user's checkout failed after (found after a test run)."""
+    from tfm.results import git_commit
+
+    def git(*args):
+        subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path, check=True,
+                       capture_output=True)
+
+    git("init", "-q")
+    (tmp_path / "a.txt").write_text("a")
+    git("add", "a.txt")
+    git("commit", "-qm", "a")
+    index = tmp_path / ".git" / "index"
+    before = index.read_bytes()
+    os.utime(tmp_path / "a.txt", (1e9, 1e9))          # same content, other stat: the index is stale
+    assert git_commit(tmp_path).endswith("-dirty") is False
+    assert index.read_bytes() == before

@@ -28,15 +28,19 @@ def tfm_version() -> str:
     return __version__
 
 
-def git_commit() -> str | None:
-    here = Path(__file__).resolve().parent
+def git_commit(here: Path | None = None) -> str | None:
+    """The commit of the checkout that holds tfm (or ``here``), "-dirty" if it has changes."""
+    here = Path(__file__).resolve().parent if here is None else here
     try:
         out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True,
                              text=True, timeout=5)
         if out.returncode != 0:
             return None
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
-                               capture_output=True, text=True, timeout=5).stdout.strip()
+        # without the optional lock: `git status` otherwise refreshes the index under
+        # .git/index.lock, and a run killed meanwhile (a campaign worker, say) left that lock
+        # in the user's checkout, where every later git command then failed
+        dirty = subprocess.run(["git", "--no-optional-locks", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=here, capture_output=True, text=True, timeout=5).stdout.strip()
         return out.stdout.strip() + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return None
