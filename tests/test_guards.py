@@ -79,6 +79,10 @@ def test_the_applicability_table_names_real_fields():
     (dict(OK, spacing="1/16", radius=0.5, max_indent=0.01, step=1e-3), "coarse", r"spacing: only 1.1 springs"),
     (dict(OK, step=0.01), "step", r"step: only 5 loading steps"),
     (dict(OK, step=0.025), "step", r"step: only 2 loading steps"),
+    # auto preload: never shallower than 10 steps, so a coarse step made it deeper instead
+    # (1/64, step 0.05: preload 0.5 for 0.082, pull-off -17 %, no word)
+    (dict(spacing="1/64", k_th=0.02, shape="paraboloid", step=0.05), "step",
+     r"step: only 1.64 loading steps to the automatic preload depth 0.0821"),
     (dict(OK, tol=1e-2), "tol", r"tol: 0.01 is looser than 0.0001"),
     (dict(OK, tol=1e-3), "tol", r"tol: 0.001 is looser"),
 ])

@@ -104,13 +104,19 @@ def neighbors_foundation_compliance(rings: int, self_term: float, spacing: float
 
 
 def auto_max_indent_uncapped(p) -> float:
+    """``auto_preload_depth``, never shallower than 10 loading steps (a ``step`` that coarse
+    is refused by tfm.guards unless allowed: the depth the physics asks for sets the scale)."""
+    return max(auto_preload_depth(p), 10.0 * p.step)
+
+
+def auto_preload_depth(p) -> float:
     """A preload deep enough that unloading starts beyond the pull-off contact radius.
 
     Boussinesq: the Hertz radius sqrt(R delta) must exceed the JKR critical radius, so
     delta = (1.5 a_c)^2 / R. Winkler: delta must exceed c_w sigma_th; take twice that.
     A fixed number of neighbour rings acts as a Winkler foundation with the compliance of
     ``neighbors_foundation_compliance``. sigma_th = F_th / A with A the layout's spring
-    area (``tfm.threshold``, the threshold's one home). Never shallower than 10 steps.
+    area (``tfm.threshold``, the threshold's one home).
     """
     from .threshold import nominal_area
 
@@ -126,7 +132,7 @@ def auto_max_indent_uncapped(p) -> float:
         # layout's own area gives sigma_th
         a_c = jkr_critical_radius(sigma * math.sqrt(p.spacing), p.radius)
         delta = (1.5 * a_c) ** 2 / p.radius
-    return max(delta, 10.0 * p.step)
+    return delta
 
 
 AUTO_PRELOAD_CAP = 0.5      # times R: never as deep as the sphere itself
