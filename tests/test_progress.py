@@ -89,3 +89,14 @@ def test_cold_cache_detection_names_kernels(monkeypatch):
     # a cache index that does not match the source (as after an edit) means compiling
     monkeypatch.setattr(grid.blocked_dot._cache._cache_file, "_load_index", lambda: {})
     assert "blocked_dot" in cold_kernels()
+
+
+def test_a_kernel_only_force_control_compiles_is_not_announced_for_other_runs(monkeypatch):
+    """solve_on_set compiles only under force control, so its cache stays empty after any
+    number of displacement-controlled runs, and each of them said "compiling" (a new
+    user's finding)."""
+    import tfm.solver as solver
+
+    monkeypatch.setattr(solver.solve_on_set._cache._cache_file, "_load_index", lambda: {})
+    assert "solve_on_set" not in cold_kernels("displacement")
+    assert "solve_on_set" in cold_kernels("force")

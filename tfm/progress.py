@@ -31,14 +31,21 @@ def _dispatchers():
             yield value
 
 
-def cold_kernels() -> list[str]:
-    """Names of hot kernels whose Numba cache is missing or stale (they will compile).
+# compiled only for force control (tfm.solver.ContactState.unit_response)
+FORCE_CONTROL_ONLY = ("solve_on_set",)
+
+
+def cold_kernels(control: str = "displacement") -> list[str]:
+    """Names of the hot kernels a run under ``control`` uses whose Numba cache is missing
+    or stale (they will compile).
 
     Reads each dispatcher's cache index, which Numba empties when the source changed.
     Returns [] if the check itself is not possible (another Numba version)."""
     cold = []
     try:
         for disp in {id(d): d for d in _dispatchers()}.values():
+            if control != "force" and disp.py_func.__name__ in FORCE_CONTROL_ONLY:
+                continue       # never compiled by such a run: "compiling" would show on every run
             cache = getattr(disp, "_cache", None)
             index = cache._cache_file._load_index() if hasattr(cache, "_cache_file") else {}
             if not index:
@@ -55,7 +62,7 @@ def run_progress(p, quiet: bool = False, stream=None):
     if quiet:
         yield None
         return
-    cold = cold_kernels()
+    cold = cold_kernels(p.control)
     if cold:
         print(f"compiling Numba kernels ({', '.join(cold)}; first run after an install or a code change, "
               "cached for later runs) ...", file=stream, flush=True)
