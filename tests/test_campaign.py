@@ -213,9 +213,13 @@ def test_runs_from_other_code_are_reported_stale_and_can_be_rerun(tmp_path, monk
     real = importlib.import_module("tfm.campaign.runner").execute
     monkeypatch.setattr("tfm.campaign.runner.execute", lambda *a, **k: calls.append(1) or real(*a, **k))
     run_campaign(spec, results_dir=tmp_path)
-    assert calls == [] and "computed by another tfm version or commit" in capsys.readouterr().err
-    run_campaign(spec, quiet=True, results_dir=tmp_path, rerun_stale=True)
+    err = capsys.readouterr().err
+    assert calls == [] and "computed by another tfm version or commit" in err
+    assert "nothing to run, 2 of 2 runs already done" in err          # it said nothing at all
+    run_campaign(spec, results_dir=tmp_path, rerun_stale=True)
     assert len(calls) == 2
+    # the recomputed runs were counted as done and as already done ("6 ... 6 already done")
+    assert "2 runs done, 0 failed, 0 already done" in capsys.readouterr().err
 
 
 def test_tables_follow_rewritten_runs_and_an_edited_file(tmp_path, monkeypatch):
@@ -780,6 +784,9 @@ def test_every_column_of_the_tables_is_documented(serial_run):
     summary, curves = load_tables(serial_run[1])
     missing = [c for c in [*summary.columns, *curves.columns] if c not in named and not c.startswith("p_")]
     assert missing == []
+    # and the other way: a documented provenance column is in every summary table
+    # (prov_checkpoint_set_aside was only there when some checkpoint had been set aside)
+    assert {c for c in named if c.startswith("prov_")} <= set(summary.columns)
 
 
 def test_a_kernel_that_is_not_positive_definite_is_refused_before_anything_runs():

@@ -102,8 +102,8 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
     # a resumed run says so: the steps before this one were computed by an earlier process
     prov["resumed_at_step"] = (ckpt.resumed_at or 0) if ckpt is not None else 0
-    if ckpt is not None and ckpt.set_aside:
-        prov["checkpoint_set_aside"] = ckpt.set_aside
+    # always present (empty when none), so that every campaign table has the column
+    prov["checkpoint_set_aside"] = (ckpt.set_aside or "") if ckpt is not None else ""
     if ckpt is not None and not keep_checkpoint:
         ckpt.remove()
     res = RunResult(p, curve, summary, prov)

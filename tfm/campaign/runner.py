@@ -162,11 +162,14 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
                 else:
                     outcomes = _run_serial(todo, ckpt, stop)
                 try:
-                    _consume(spec, store, todo, outcomes, skipped=len(status.done), quiet=quiet,
+                    _consume(spec, store, todo, outcomes, skipped=len(set(status.done) - redo), quiet=quiet,
                              handled=handled)
                 except KeyboardInterrupt:
                     if stop.signum is None:
                         raise
+            elif not quiet:
+                print(f"campaign {spec.name}: nothing to run, {len(status.done)} of {len(spec.runs)} runs "
+                      f"already done -> {store.root}", file=sys.stderr)
             store.write_tables(spec)
     if stop.signum is not None:
         raise _interrupted(spec, store, [r for r in todo if r.run_id not in handled], stop.signum)
