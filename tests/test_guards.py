@@ -291,3 +291,22 @@ def test_the_memory_estimate_counts_the_neighbour_list():
     p = Params.from_dict(dict(spacing="1/64", k_th=0.02, kernel="neighbors", operator="tree", neighbor_rings=64,
                               max_indent=0.05, step=2.5e-3))
     assert estimate_memory(p) > 1313 * 2**20
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(max_indent="autoo"), r"max_indent: cannot read 'autoo': give 'auto' .* or a depth"),
+    (dict(alpha=0.5), r"alpha: 0.5 has no effect here; .* with f_th, alpha = 0 \(no area dependence\) is "
+                      r"accepted too \(leave it at its default 0.75\)"),
+])
+def test_a_refusal_names_what_is_allowed(kw, match):
+    """A new user's findings: 'autoo' was refused without a word of 'auto', and the alpha
+    message said both 'only alpha = 0 is accepted' and 'leave it at 0.75'."""
+    with pytest.raises(ParameterError, match=match):
+        Params.from_dict(kw)
+
+
+def test_a_neighbour_kernel_that_is_not_positive_definite_names_neighbor_rings():
+    from tfm import simulate
+
+    with pytest.raises(ParameterError, match="Raise neighbor_rings or self_term"):
+        simulate(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05, step=1e-3, kernel="neighbors")

@@ -228,6 +228,8 @@ def _kernel_advice(p: Params) -> str:
         safe = (1.0 - 1.0 / p.self_term) / 2.0
         return (f"Lower jitter (below {safe:.3g} no pair is closer than 1/self_term spacings) or try "
                 "another seed, raise self_term or change the kernel.")
+    if p.kernel == "neighbors":
+        return "Raise neighbor_rings or self_term, or change the kernel."
     return "Raise self_term or change the kernel."
 
 

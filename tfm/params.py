@@ -369,8 +369,8 @@ class Applies:
 # default value given explicitly there is a ParameterWarning (harmless, but probably not
 # what was meant). New conditional parameters add one line here.
 APPLIES: dict[str, Applies] = {
-    "alpha": Applies("k_th is given (F_th = k_th A^alpha); with an explicit f_th only alpha = 0 "
-                     "(no area dependence) is accepted", lambda p: p.k_th is not None,
+    "alpha": Applies("k_th is given (F_th = k_th A^alpha); with f_th, alpha = 0 (no area "
+                     "dependence) is accepted too", lambda p: p.k_th is not None,
                      also=lambda p: p.alpha == 0.0),
     "self_term": Applies("kernel is 'boussinesq' or 'neighbors' (the Winkler kernel uses c_w)",
                          lambda p: p.kernel != "local"),
@@ -439,7 +439,13 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
             return None
         kind = _KINDS[key]
         if key == "max_indent":
-            return value if value == "auto" else parse_number(value, key)
+            if value == "auto":
+                return value
+            try:
+                return parse_number(value, key)
+            except ParameterError:
+                raise ParameterError(f"max_indent: cannot read {value!r}: give 'auto' (the preload the "
+                                     "JKR estimate asks for) or a depth such as 0.05 or 1/20") from None
         if key == "k_th_coefficient":
             from .units import K_TH_COEFFICIENTS
             if isinstance(value, str) and value not in K_TH_COEFFICIENTS:
