@@ -70,8 +70,10 @@ def _add_param_flags(parser: argparse.ArgumentParser) -> None:
     for f in dataclasses.fields(Params):       # no Params(): --help must not load NumPy
         flag = "--" + f.name.replace("_", "-")
         default = f.default
-        parser.add_argument(flag, dest=f.name, default=None, metavar="VALUE",
-                            help=f"{PARAM_HELP.get(f.name, '')} (default: {default!r})")
+        text = PARAM_HELP.get(f.name, "")
+        if "(default" not in text:            # a help text that says its default itself
+            text += f" (default: {default!r})"
+        parser.add_argument(flag, dest=f.name, default=None, metavar="VALUE", help=text)
 
 
 def _params_from_args(args) -> Params:
@@ -217,8 +219,9 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
     from .simulate import RunWarning, simulate
 
     if not args.quiet:
+        body = f"map={Path(p.height_map).name}" if p.shape == "height_map" else f"R={p.radius:g}"
         print(f"tfm run {p.run_id}: spacing={p.spacing:.6g} F_th={p.threshold_force:.4g} "
-              f"R={p.radius:g} shape={p.shape} kernel={p.kernel} operator={p.operator} "
+              f"{body} shape={p.shape} kernel={p.kernel} operator={p.operator} "
               f"max_indent={p.delta_max:.4g} ({n_loading_steps(p)} loading steps), "
               f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
     for note in notes:                    # stated before the run starts

@@ -186,8 +186,9 @@ def summarize(curve, out, p: Params, n_springs: int, grid_side: int | None) -> d
     k = int(np.argmax(tension)) if n else 0
     warnings = []
     if out.edge_steps:
+        grow = "enlarge extent" if p.extent is not None else "raise extent_margin or give a larger extent"
         warnings.append(f"contact reached the grid edge at {out.edge_steps} steps "
-                        f"(half-width {p.half_width:g}); enlarge extent or extent_margin")
+                        f"(half-width {p.half_width:g}); {grow}")
     if out.solver_failures:
         warnings.append(f"contact solve did not converge {out.solver_failures} times "
                         f"(worst relative residual {out.max_residual:.2e}, tol {p.tol:g}); raise max_iter"
