@@ -17,6 +17,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 import tfm
+from tfm.plots import fold_x_offsets
 
 
 def main(out: Path) -> None:
@@ -37,7 +38,8 @@ def main(out: Path) -> None:
     area = (ds["area"] * (ds["state"] == 1)).sum(("x", "y"))
     radius = np.sqrt(area / np.pi)
 
-    fig = Figure(figsize=(7.0, 3.0), layout="constrained")
+    fig = Figure(figsize=(8.0, 3.2), layout="constrained")
+    fig.get_layout_engine().set(wspace=0.1)          # room between (a)'s colour bar and (b)
     ax1, ax2 = fig.subplots(1, 2)
     snap["F"].where(in_contact).plot(ax=ax1, x="x", y="y", cmap="RdBu_r", center=0.0,
                                      cbar_kwargs={"label": "spring force F (tension > 0)"})
@@ -51,6 +53,7 @@ def main(out: Path) -> None:
     ax2.legend(frameon=False)
     ax2.ticklabel_format(axis="x", style="sci", scilimits=(-2, 2))
     ax2.xaxis.set_major_locator(MaxNLocator(5))
+    fold_x_offsets(fig)                              # the common factor into the axis label
     fig.savefig(out / "fields.png", dpi=150)
     ds.close()
     print(f"wrote {out / 'fields.png'}")
