@@ -798,3 +798,46 @@ def test_a_kernel_that_is_not_positive_definite_is_refused_before_anything_runs(
         spec_from_dict({"name": "bad", "base": base, "sweep": {"neighbor_rings": [1, 2]}})
     with pytest.raises(tfm.ParameterError, match="not positive definite"):      # as tfm run says
         tfm.simulate(**{**base, "neighbor_rings": 1})
+
+
+def _tiny(name):
+    return spec_from_dict({"name": name, "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
+                                                  "max_indent": 0.05, "step": 5e-3},
+                           "sweep": {"alpha": [0.5, 0.75]}}, source=name)
+
+
+def test_status_says_when_the_tables_do_not_hold_the_stored_runs(tmp_path, capsys):
+    """A campaign process killed after storing its last run, before it rebuilt the tables:
+    status said "2 done", with no summary.parquet at all (a user's crash test)."""
+    spec = _tiny("killed")
+    toml = _toml_of(spec, tmp_path)
+    run_campaign(spec, quiet=True, results_dir=tmp_path)
+    store = CampaignStore.for_spec(spec, tmp_path)
+    store.table_path("summary").unlink()                       # as if killed before the rebuild
+    capsys.readouterr()
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "2 done" in out and "the tables (summary, curves, failures) do not hold these runs yet" in out
+    run_campaign(spec, quiet=True, results_dir=tmp_path)      # the same command rebuilds them
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    assert "do not hold" not in capsys.readouterr().out and store.table_path("summary").exists()
+
+
+def test_a_stop_signal_after_the_last_run_is_not_an_interruption(tmp_path, monkeypatch, capsys):
+    """SIGTERM after every run was stored: the campaign said "interrupted, 0 runs did not
+    finish" and a batch script saw exit 143 for a complete campaign."""
+    import os
+    import signal
+
+    runner = importlib.import_module("tfm.campaign.runner")
+    real = runner._consume
+
+    def consume_then_signal(*a, **k):
+        real(*a, **k)
+        os.kill(os.getpid(), signal.SIGTERM)     # recorded by the campaign's handler
+
+    monkeypatch.setattr(runner, "_consume", consume_then_signal)
+    spec = _tiny("late")
+    run_campaign(spec, quiet=True, results_dir=tmp_path)      # no CampaignInterrupted
+    assert "the campaign is complete" in capsys.readouterr().err
+    assert len(load_tables(spec, results_dir=tmp_path)[0]) == 2

@@ -172,7 +172,12 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
                       f"already done -> {store.root}", file=sys.stderr)
             store.write_tables(spec)
     if stop.signum is not None:
-        raise _interrupted(spec, store, [r for r in todo if r.run_id not in handled], stop.signum)
+        left = [r for r in todo if r.run_id not in handled]
+        if left:
+            raise _interrupted(spec, store, left, stop.signum)
+        # the signal came after the last run was stored and the tables written: complete
+        print(f"campaign {spec.name}: a stop signal came after every run had finished; the campaign "
+              "is complete", file=sys.stderr)
     return store.root
 
 

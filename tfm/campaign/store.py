@@ -239,12 +239,7 @@ class CampaignStore:
     def write_tables(self, spec: CampaignSpec, status: Status | None = None) -> bool:
         """Assemble summary, curves and failures from the run files; False if already current."""
         status = status or self.status(spec)
-        # The ids alone do not say the tables are current: --rerun-stale rewrites runs, a
-        # failed retry rewrites its record, and an edited file changes p_* (allow is not in
-        # the run id). So the record also holds the file's digest and the run files' stats.
-        record = {"name": spec.name, "description": spec.description, "sha256": spec.digest,
-                  "run_ids": status.done, "failed": status.failed,
-                  "files": self._files_digest(status)}
+        record = self._record(spec, status)
         if self._tables_current(record):
             return False
         import pandas as pd
@@ -285,6 +280,18 @@ class CampaignStore:
         write_table(failures_df, self.table_path("failures"), extra=extra)
         write_table(summary_df, self.table_path("summary"), extra=extra)
         return True
+
+    def _record(self, spec: CampaignSpec, status: Status) -> dict[str, Any]:
+        # The ids alone do not say the tables are current: --rerun-stale rewrites runs, a
+        # failed retry rewrites its record, and an edited file changes p_* (allow is not in
+        # the run id). So the record also holds the file's digest and the run files' stats.
+        return {"name": spec.name, "description": spec.description, "sha256": spec.digest,
+                "run_ids": status.done, "failed": status.failed, "files": self._files_digest(status)}
+
+    def tables_current(self, spec: CampaignSpec, status: Status | None = None) -> bool:
+        """Whether summary, curves and failures hold the stored runs as they are now (a
+        campaign process killed after storing a run has not rebuilt them)."""
+        return self._tables_current(self._record(spec, status or self.status(spec)))
 
     def _files_digest(self, status: Status) -> str:
         """A digest of the run and failure files as they are now: identity, size and mtime
