@@ -841,3 +841,26 @@ def test_a_stop_signal_after_the_last_run_is_not_an_interruption(tmp_path, monke
     run_campaign(spec, quiet=True, results_dir=tmp_path)      # no CampaignInterrupted
     assert "the campaign is complete" in capsys.readouterr().err
     assert len(load_tables(spec, results_dir=tmp_path)[0]) == 2
+
+
+def test_a_damaged_run_file_is_named_with_its_remedy(tmp_path, capsys):
+    """A run file whose footer is intact but whose data is not (a machine crash, a bad copy)
+    stopped every later `tfm campaign run` with a raw pyarrow traceback."""
+    spec = _tiny("damaged")
+    toml = _toml_of(spec, tmp_path)
+    run_campaign(spec, quiet=True, results_dir=tmp_path)
+    store = CampaignStore.for_spec(spec, tmp_path)
+    path = store.run_path(spec.runs[0].run_id)
+    import pyarrow.parquet as pq
+
+    chunk = pq.ParquetFile(path).metadata.row_group(0).column(4)     # the forces, say
+    start, size = chunk.data_page_offset, chunk.total_compressed_size
+    data = bytearray(path.read_bytes())
+    data[start + size // 2:start + size] = bytes(size - size // 2)  # its data zeroed, the footer intact
+    path.write_bytes(bytes(data))
+    assert tfm_main(["campaign", "run", str(toml), "--results-dir", str(tmp_path), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: the stored run {spec.runs[0].run_id} cannot be read" in err and "delete it" in err
+    path.unlink()
+    assert tfm_main(["campaign", "run", str(toml), "--results-dir", str(tmp_path), "-q"]) == 0
+    assert len(load_tables(spec, results_dir=tmp_path)[0]) == 2

@@ -258,7 +258,12 @@ class CampaignStore:
                          **param_columns(by_id[rid].params),
                          **{RESULT_PREFIX + k: v for k, v in summary.items()},
                          **{PROV_PREFIX + k: v for k, v in meta.get("provenance", {}).items()}})
-            curve = pq.read_table(path).to_pandas()
+            try:
+                curve = pq.read_table(path).to_pandas()
+            except (OSError, ValueError) as exc:     # pyarrow's errors derive from these
+                raise CampaignError(f"{path}: the stored run {rid} cannot be read ({exc}); the file is "
+                                    "damaged (a crash of the machine, a bad copy): delete it and run the "
+                                    "campaign again to recompute that run") from None
             curve.insert(0, "run_id", rid)
             curves.append(curve)
         fails = []
