@@ -193,23 +193,21 @@ def check(p, memory: bool = True) -> list[str]:
                           f"load (a ~ {a:.3g}, spacing {p.spacing:.3g}); below "
                           f"{MIN_SPRINGS_ACROSS_RADIUS:g} the pull-off is erratic (errors of 50 to 170 %; "
                           "one touching spring gives a pull-off of 0). Refine the spacing or preload deeper")
-    steps = p.delta_max / p.step
+    # An automatic preload is never shallower than 10 steps, so against it a coarse step
+    # could never be refused; it is measured against the depth the physics asks for (1/64,
+    # step 0.05: the preload went 6x deeper, pull-off -17 %). A flat punch's pull-off does
+    # not depend on its preload.
+    auto = p.max_indent == "auto" and p.shape != "flat_punch"
+    depth = p.delta_max
+    if auto:
+        from .theory import auto_max_indent
+        depth = auto_max_indent(p, step_floor=False)
+    steps = depth / p.step
     if p.control == "displacement" and steps < MIN_LOADING_STEPS * (1 - 1e-9) and "step" not in allowed:
-        _refuse("step", f"step: only {steps:.3g} loading steps (max_indent {p.delta_max:.3g}, step "
-                        f"{p.step:.3g}); below {MIN_LOADING_STEPS} the step shifts the pull-off by up to "
-                        "16 %. Use step <= max_indent / 10")
-    if p.control == "displacement" and p.max_indent == "auto" and p.shape != "flat_punch" \
-            and "step" not in allowed:
-        # the automatic preload is never shallower than 10 steps; a step that sets it is as
-        # coarse against the physics (1/64: step 0.05 pushed it 6x deeper, pull-off -17 %)
-        from .theory import AUTO_PRELOAD_CAP, auto_preload_depth
-
-        depth = min(auto_preload_depth(p), AUTO_PRELOAD_CAP * p.radius)
-        if depth / p.step < MIN_LOADING_STEPS * (1 - 1e-9):
-            _refuse("step", f"step: only {depth / p.step:.3g} loading steps to the automatic preload depth "
-                            f"{depth:.3g} (step {p.step:.3g}); below {MIN_LOADING_STEPS} the step, not the "
-                            f"physics, sets the pull-off. Use step <= {depth / MIN_LOADING_STEPS:.3g}, or give "
-                            "max_indent")
+        where = "the automatic preload depth" if auto else "max_indent"
+        _refuse("step", f"step: only {steps:.3g} loading steps to {where} {depth:.3g} (step {p.step:.3g}); "
+                        f"below {MIN_LOADING_STEPS} the step shifts the pull-off by up to 16 %. Use step <= "
+                        f"{depth / MIN_LOADING_STEPS:.3g}" + (", or give max_indent" if auto else ""))
     if p.tol > MAX_TOL and "tol" not in allowed:
         _refuse("tol", f"tol: {p.tol:g} is looser than {MAX_TOL:g}; snap and entry decisions then "
                        "follow the solver error (tol 1e-2 moved the pull-off by 16 %, 1e-3 by 3 %)")

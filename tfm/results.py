@@ -91,8 +91,6 @@ class RunResult:
 
     def columns(self) -> dict[str, Any]:
         """The curve as NumPy columns (CURVE_COLUMNS), without making a DataFrame."""
-        import numpy as np
-
         if isinstance(self._curve, dict):
             return dict(self._curve)
         return {c: self._curve[c].to_numpy(dtype=object if c == "phase" else None) for c in CURVE_COLUMNS}

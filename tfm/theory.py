@@ -103,10 +103,11 @@ def neighbors_foundation_compliance(rings: int, self_term: float, spacing: float
     return spacing * (self_term + float((1.0 / r[mask]).sum()))
 
 
-def auto_max_indent_uncapped(p) -> float:
-    """``auto_preload_depth``, never shallower than 10 loading steps (a ``step`` that coarse
-    is refused by tfm.guards unless allowed: the depth the physics asks for sets the scale)."""
-    return max(auto_preload_depth(p), 10.0 * p.step)
+def auto_max_indent_uncapped(p, step_floor: bool = True) -> float:
+    """``auto_preload_depth``, never shallower than 10 loading steps (without ``step_floor``:
+    the depth the physics asks for, against which tfm.guards measures the step)."""
+    depth = auto_preload_depth(p)
+    return max(depth, 10.0 * p.step) if step_floor else depth
 
 
 def auto_preload_depth(p) -> float:
@@ -138,9 +139,9 @@ def auto_preload_depth(p) -> float:
 AUTO_PRELOAD_CAP = 0.5      # times R: never as deep as the sphere itself
 
 
-def auto_max_indent(p) -> float:
+def auto_max_indent(p, step_floor: bool = True) -> float:
     """``auto_max_indent_uncapped``, capped at 0.5 R (tfm.guards states the cap)."""
-    return min(auto_max_indent_uncapped(p), AUTO_PRELOAD_CAP * p.radius)
+    return min(auto_max_indent_uncapped(p, step_floor), AUTO_PRELOAD_CAP * p.radius)
 
 
 def jkr_curve(k_ic, radius, a):
