@@ -4,6 +4,10 @@ refused before any computation, or set aside with a warning."""
 from __future__ import annotations
 
 import contextlib
+import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +23,8 @@ from tfm.checkpoint import CheckpointWarning
 from tfm.cli import main as tfm_main
 
 # 20 loading steps and about as many unloading ones: a second or two.
-SMOKE = Path(__file__).resolve().parents[1] / "campaigns" / "smoke.toml"
+REPO = Path(__file__).resolve().parents[1]
+SMOKE = REPO / "campaigns" / "smoke.toml"
 P = Params(spacing=1 / 32, k_th=0.02, f_th=None, shape="paraboloid", max_indent=0.02, step=1e-3)
 N_LOAD = 20
 
@@ -93,6 +98,52 @@ def test_a_run_stopped_twice_ends_with_the_uninterrupted_curve(reference, tmp_pa
     assert not path.exists()              # a finished run leaves no checkpoint
     assert_same_run(res, reference)
     assert reference.provenance["resumed_at_step"] == 0
+
+
+def signal_after(steps: int, sig=signal.SIGINT):
+    """A stop signal to this process while the run computes, once ``steps`` steps are recorded."""
+    def progress(rec):
+        if rec.step + 1 == steps:
+            os.kill(os.getpid(), sig)
+    return progress
+
+
+@pytest.mark.parametrize("at", [7, N_LOAD + 4, "last"])
+def test_ctrl_c_saves_the_step_in_progress(reference, tmp_path, capsys, at):
+    """Ctrl-C cost the work since the last periodic save (every 10 minutes by default).
+    Now the step in progress ends, its state is saved, and then KeyboardInterrupt comes;
+    during the last step the whole curve is kept, and continuing it computes nothing. The
+    continued run is the uninterrupted one, bit for bit."""
+    steps = len(reference.curve) if at == "last" else at
+    path = tmp_path / "run.npz"
+    with pytest.raises(KeyboardInterrupt):
+        simulate(P, progress=signal_after(steps), checkpoint=path)      # no periodic save
+    assert "stopping after the step in progress" in capsys.readouterr().err
+    meta = tfm.checkpoint.read_meta(path)
+    assert meta["steps"] == steps
+    assert meta["phase"] == ("done" if at == "last" else "load" if steps <= N_LOAD else "unload")
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler    # handler restored
+    res = simulate(P, checkpoint=path)
+    assert res.provenance["resumed_at_step"] == steps and not path.exists()
+    assert_same_run(res, reference)
+
+
+def test_sigterm_saves_the_step_in_progress_then_ends_the_process(tmp_path):
+    """SIGTERM (a cluster's time limit, `kill`) killed a run at once. Now the process ends
+    the same way, by SIGTERM, after saving the step in progress; a second signal would not
+    wait. Without a checkpoint there is nothing to save and nothing changes."""
+    path = tmp_path / "run.npz"
+    code = ("import os, signal; from tfm import Params, simulate\n"
+            f"P = Params(spacing=1/32, k_th=0.02, f_th=None, shape='paraboloid', max_indent=0.02, step=1e-3)\n"
+            "def progress(rec):\n"
+            "    if rec.step == 4: os.kill(os.getpid(), signal.SIGTERM)\n"
+            f"simulate(P, progress=progress, checkpoint={str(path)!r})\n"
+            "print('not stopped')\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert proc.returncode == -signal.SIGTERM, proc.stderr
+    assert "not stopped" not in proc.stdout and "SIGTERM: stopping after the step in progress" in proc.stderr
+    assert tfm.checkpoint.read_meta(path)["steps"] == 5
 
 
 def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path, monkeypatch):

@@ -8,6 +8,11 @@ most every ``every`` seconds, everything the next step reads: the contact state'
 and its counters. A resumed run goes on from the next step and ends with the same curve,
 bit for bit, as a run that was never stopped (tests/test_checkpoint.py).
 
+SIGINT (Ctrl-C) or SIGTERM (a cluster's time limit, `kill`) during a checkpointed run is
+acted on after the step in progress: the state is saved, then the signal goes to the
+handler that was there before (KeyboardInterrupt, the process's end, a campaign's own), so
+a stopped run loses no finished step. A second signal acts at once (StopRequest).
+
 A checkpoint serves only the run it was written for (the run id hashes every parameter)
 and the same engine (a hash of tfm's source files): other code could not promise the same
 bits, so the run then starts afresh, with a warning (CheckpointWarning; its provenance
@@ -16,10 +21,14 @@ copies of states) and runs with field snapshots (a NetCDF stream) are not checkp
 """
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import hashlib
 import json
 import os
+import signal
+import sys
+import threading
 import time
 import warnings
 from dataclasses import dataclass, fields
@@ -31,6 +40,7 @@ from .config import CHECKPOINT_EVERY
 from .params import ParameterError
 
 FORMAT = 1
+DONE = "done"      # the phase of a checkpoint saved after the curve's last step
 
 _CODE_HASH = None
 
@@ -67,6 +77,54 @@ def check_every(every, name: str = "checkpoint_every") -> float:
     if isinstance(every, bool) or not isinstance(every, (int, float)) or not every >= 0:
         raise ParameterError(f"{name}: must be >= 0 seconds, got {every!r}")
     return float(every)
+
+
+class StopRequest:
+    """SIGINT and SIGTERM while a checkpointed run computes: remembered, and acted on at the
+    next step boundary (``pending``), where the run saves its state and calls ``deliver``.
+    Installed only in the main thread (only it may handle signals) and only for signals
+    that are not ignored (a campaign's pool workers ignore SIGINT: their campaign decides)."""
+
+    def __init__(self, path):
+        self.path = path
+        self.signum: int | None = None
+        self._saved: dict = {}
+
+    @property
+    def pending(self) -> bool:
+        return self.signum is not None
+
+    def __call__(self, signum, frame):
+        if self.signum is not None:        # the second signal: at once
+            self.signum = signum
+            self.deliver()
+            return
+        self.signum = signum
+        print(f"tfm: {signal.Signals(signum).name}: stopping after the step in progress, to save the "
+              f"run's state in {self.path} (a second signal stops at once)", file=sys.stderr, flush=True)
+
+    @contextlib.contextmanager
+    def installed(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                if signal.getsignal(sig) is not signal.SIG_IGN:
+                    self._saved[sig] = signal.signal(sig, self)
+        try:
+            yield self
+        finally:
+            self._restore()
+
+    def _restore(self) -> None:
+        for sig, handler in self._saved.items():
+            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+        self._saved = {}
+
+    def deliver(self) -> None:
+        """The remembered signal, to the handlers that were there before (raises
+        KeyboardInterrupt for Ctrl-C, ends the process for SIGTERM's default)."""
+        signum, self.signum = self.signum, None
+        self._restore()
+        signal.raise_signal(signum)
 
 
 @dataclass

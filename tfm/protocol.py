@@ -25,11 +25,13 @@ snapshots). Files are written only through ``observe`` and a checkpoint passed i
 from __future__ import annotations
 
 import copy
+import sys
 import time
 from typing import Callable
 
 import numpy as np
 
+from .checkpoint import DONE, StopRequest
 from .solver import ContactState, CurveResult, Problem, StepRecord
 
 # Bisections of the last load step before the jump-off: resolution load_step / 2**10.
@@ -61,7 +63,8 @@ def displacement_control(prob: Problem, delta_max: float, step: float, max_unloa
                          observe: Observer | None = None, checkpoint=None) -> CurveResult:
     """Load from d = 0 to d = -delta_max in steps of ``step``, then unload until no spring
     is in contact (or max_unload_steps is reached, which is flagged). With a checkpoint,
-    the state is saved after finished steps, and a saved state is continued from."""
+    the state is saved after finished steps, and after the step in progress when SIGINT
+    or SIGTERM comes (tfm.checkpoint.StopRequest); a saved state is continued from."""
     out = CurveResult()
     t0 = time.perf_counter()
     state = ContactState(prob)
@@ -72,14 +75,39 @@ def displacement_control(prob: Problem, delta_max: float, step: float, max_unloa
     if saved is not None:
         state.restore(saved.carried)
         out, before = saved.out, saved.elapsed
+        if saved.phase == DONE:          # stopped after its last step: nothing to compute
+            out.wall_time = before
+            return out
         first[saved.phase] = saved.j + 1
         if saved.phase == "unload":
             first["load"] = n_load + 1
+    if checkpoint is None:
+        return _displacement_steps(state, out, first, n_load, delta_max, step, max_unload_steps,
+                                   observe, lambda phase, j: None, t0, before)
+    stop = StopRequest(checkpoint.path)
 
     def done(phase, j):
-        if checkpoint is not None:
-            checkpoint.step_done(state, out, phase, j, before + time.perf_counter() - t0)
+        elapsed = before + time.perf_counter() - t0
+        if stop.pending:
+            checkpoint.save(state, out, phase, j, elapsed)
+            print(f"tfm: saved the state after step {len(out.steps)} in {checkpoint.path}", file=sys.stderr,
+                  flush=True)
+            stop.deliver()
+        else:
+            checkpoint.step_done(state, out, phase, j, elapsed)
 
+    with stop.installed():
+        out = _displacement_steps(state, out, first, n_load, delta_max, step, max_unload_steps,
+                                  observe, done, t0, before)
+        if stop.pending:                 # it came during the last step: keep the whole curve
+            done(DONE, 0)
+    return out
+
+
+def _displacement_steps(state, out, first, n_load, delta_max, step, max_unload_steps, observe,
+                        done, t0, before) -> CurveResult:
+    """The steps of displacement control from ``first`` on; ``done(phase, j)`` after each
+    one that a later step follows."""
     k = len(out.steps)
     for j in range(first["load"], n_load + 1):
         rec = state.advance(-min(j * step, delta_max), k, "load", out)
