@@ -41,6 +41,15 @@ def test_tfm_run_bad_flag_value_exits_2(capsys):
     assert "spacing: must be > 0" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("flag, value, message", [("--spacing", "-1/64", "spacing: must be > 0"),
+                                                   ("--step", "-1e-3", "step: must be > 0")])
+def test_a_negative_value_gets_its_parameters_message(capsys, flag, value, message):
+    """`--spacing -1/64` got argparse's "expected one argument": a word starting with '-'
+    is taken for an option unless it looks like a plain negative number."""
+    assert main(["run", flag, value, "-q"]) == 2
+    assert message in capsys.readouterr().err
+
+
 def test_tfm_run_flags_a_suspect_run_with_exit_3(tmp_path, capsys):
     rc = main(["run", "--spacing", "1/32", "--f-th", "0", "--shape", "paraboloid", "--max-indent", "0.05",
                "--step", "5e-3", "--extent", "0.15", "-o", str(tmp_path / "c.parquet"), "-q", "--no-plot"])

@@ -340,6 +340,21 @@ def exit_now(code: int) -> None:
     os._exit(code)
 
 
+def attach_negative_values(argv: list[str]) -> list[str]:
+    """``--flag -1/64`` as ``--flag=-1/64``: argparse takes a word that starts with '-' for
+    an option unless it looks like a plain negative number, so a negative fraction or
+    exponent got "expected one argument" instead of the parameter's own range message. No
+    option of tfm starts with a digit or a dot."""
+    out = []
+    for word in argv:
+        if (out and out[-1].startswith("--") and "=" not in out[-1] and len(word) > 1
+                and word[0] == "-" and (word[1].isdigit() or word[1] == ".")):
+            out[-1] = f"{out[-1]}={word}"
+        else:
+            out.append(word)
+    return out
+
+
 def main(argv=None) -> int:
     """The `tfm` command; ``argv`` None: the process's own arguments, and the process ends
     after it."""
@@ -354,7 +369,7 @@ def main(argv=None) -> int:
         # processes (figure, campaign workers) inherit the setting; a user's value stands.
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(attach_negative_values(sys.argv[1:] if argv is None else argv))
     if argv is None and args.func is cmd_run:
         # One curve in a process of its own. Importing Numba, pandas and pyarrow makes
         # millions of objects, and the cyclic collector's passes over them took 0.25 s of a
@@ -369,6 +384,11 @@ def main(argv=None) -> int:
     except ParameterError as exc:
         print(f"tfm: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # the reader of the output went away (`tfm campaign list | head`): no traceback,
+        # and nothing more written to the closed pipe at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 128 + 13
     except KeyboardInterrupt:
         if args.func is not cmd_run:
             raise

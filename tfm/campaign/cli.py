@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import sys
 from pathlib import Path
@@ -157,15 +158,20 @@ def cmd_list(args) -> int:
     files = sorted(Path(args.dir).glob("*.toml"))
     if not files:
         print(f"no campaign files in {args.dir}/", file=sys.stderr)
+    # one line per file: the names in one column, the description on one line, cut to a
+    # terminal's width (the whole of it is in the file, and in a pipe)
+    width = max((len(path.stem) for path in files), default=0)
+    columns = shutil.get_terminal_size().columns if sys.stdout.isatty() else None
     for path in files:
         try:
             spec = load_spec(path)
         except CampaignError as exc:
-            print(f"{path.stem:20s} INVALID: {exc}")
+            print(f"{path.stem:{width}s} INVALID: {exc}")
             continue
         st = CampaignStore.for_spec(spec, args.results_dir).status(spec)
-        print(f"{path.stem:20s} {st.total:4d} runs {len(st.done):4d} done {len(st.failed):3d} failed"
-              f"  {spec.description}")
+        line = (f"{path.stem:{width}s} {st.total:4d} runs {len(st.done):4d} done {len(st.failed):3d} failed  "
+                + " ".join(spec.description.split()))
+        print(line if columns is None or len(line) <= columns else line[:columns - 3] + "...")
     return 0
 
 
