@@ -111,15 +111,36 @@ def test_a_flat_punch_under_force_control_is_sized_and_reported_as_a_flat_punch(
     assert not s["warnings"]
 
 
-def test_the_step_guard_counts_load_steps_under_force_control():
-    """Under force control ``step`` is the first approach, not a loading step: 5 indent
-    steps to max_indent with 100 load steps ran before, refused ('only 5 loading steps')."""
+@pytest.mark.parametrize("spacing", [1 / 32, 1 / 64])
+def test_the_loading_branch_is_displacement_controls(spacing):
+    """The Newton step of a load step went past its load when springs entered (an
+    overshoot), and the springs pulled in stayed, held in tension when the flat backed
+    off: at 1/32 the first load steps had up to 85 % more indent than displacement
+    control's loading branch at the same load (0.00419 against 0.00227), and the first
+    approach of one `step` did the same with a coarse step. Now the indent at each held
+    load is displacement control's at that load within one step: both move the flat by at
+    most `step`, so they may resolve an entry one step apart, no more (measured: 0.02 and
+    0.01 steps; before, 7.7 and 1.6)."""
+    p = Params(spacing=spacing, f_th=None, **STANDARD)
+    disp = tfm.simulate(p).curve
+    force = tfm.simulate(p.replace(control="force")).curve
+    dl, fl = disp[disp["phase"] == "load"], force[force["phase"] == "load"]
+    assert (np.diff(dl["force"]) > 0).all()          # np.interp needs an increasing load
+    expected = np.interp(fl["force"], dl["force"], dl["indent"])
+    assert np.abs(fl["indent"].to_numpy() - expected).max() <= p.step
+
+
+def test_the_step_guard_applies_under_force_control():
+    """``step`` is the largest move of the flat while loading under force control too, so
+    a coarse one sets the answer as it does under displacement control (1/32, step 0.02:
+    21 springs at the first load step where finer moves take in 9); it ran unchecked."""
     from tfm.guards import check
 
     p = Params(control="force", step=0.01, f_th=None, **STANDARD)
-    assert check(p) == []
-    with pytest.raises(ParameterError, match="step: only 5 loading steps"):
-        check(p.replace(control="displacement"))
+    for control in ("force", "displacement"):
+        with pytest.raises(ParameterError, match="step: only 5 loading steps"):
+            check(p.replace(control=control))
+    assert check(p.replace(step=0.005)) == []
 
 
 def test_force_control_on_a_height_map_is_refused(tmp_path):

@@ -15,10 +15,11 @@ alpha = 0.75, max_indent = 0.05; reference 3.19e-3 at spacing 1/256):
   the answer is erratic, set by which few springs touch.
 - ``step``: loading steps max_indent / step. At spacing 1/32 the pull-off moved -16 %
   with 5 steps, -4 % with 10, -0.8 % with 50 and 0 with 200 against 400: below 10
-  steps the step, not the physics, sets the answer. Displacement control only: under
-  force control ``step`` is the first approach, and the load steps max_load / load_step
-  hardly matter, as the last load held is refined by bisection (jump-off at spacing
-  1/32 and 1/64: within 5e-5 and 3e-4 relative from 3 to 400 load steps, 2026-11-24).
+  steps the step, not the physics, sets the answer. Under force control too, where
+  ``step`` is the largest move of the flat while loading (tfm.protocol._load_to); the
+  load steps max_load / load_step hardly matter, as the last load held is refined by
+  bisection (jump-off at spacing 1/32 and 1/64: within 5e-5 and 3e-4 relative from 3 to
+  400 load steps, 2026-11-24).
 - ``tol``: the CG tolerance. Snap and entry decisions compare forces and gaps with the
   threshold, so a loose solve flips them: at spacing 1/64 tol 1e-2 moved the pull-off
   by -16.5 %, 3e-3 by +3.6 %, 1e-3 by +2.9 %, 1e-4 by 1.5e-6 (relative) against 1e-10.
@@ -197,13 +198,15 @@ def check(p, memory: bool = True) -> list[str]:
     # could never be refused; it is measured against the depth the physics asks for (1/64,
     # step 0.05: the preload went 6x deeper, pull-off -17 %). A flat punch's pull-off does
     # not depend on its preload.
-    auto = p.max_indent == "auto" and p.shape != "flat_punch"
+    # Under force control with a max_load the depth is that load's non-adhesive one.
+    auto = (p.max_indent == "auto" and p.shape != "flat_punch"
+            and not (p.control == "force" and p.max_load is not None))
     depth = p.delta_max
     if auto:
         from .theory import auto_max_indent
         depth = auto_max_indent(p, step_floor=False)
     steps = depth / p.step
-    if p.control == "displacement" and steps < MIN_LOADING_STEPS * (1 - 1e-9) and "step" not in allowed:
+    if steps < MIN_LOADING_STEPS * (1 - 1e-9) and "step" not in allowed:
         where = "the automatic preload depth" if auto else "max_indent"
         _refuse("step", f"step: only {steps:.3g} loading steps to {where} {depth:.3g} (step {p.step:.3g}); "
                         f"below {MIN_LOADING_STEPS} the step shifts the pull-off by up to 16 %. Use step <= "
