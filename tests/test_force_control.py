@@ -29,6 +29,21 @@ def test_jump_off_is_the_displacement_controlled_pull_off(spacing):
     assert last["n_contact"] == 0 and last["force"] == 0.0
 
 
+def test_the_loop_closes_at_the_jump_off():
+    """The row after the jump-off had the d at which the Newton steps found no spring left,
+    an artefact 3x deeper than the jump at 1/64; the hysteresis ran a line to it (+36 %)
+    and the figure drew the jump there. Now the row sits at the last load held, with
+    P = +0.0 (it was -0.0, shown as "P = -0"), and the hysteresis is the work up to the jump."""
+    from tfm.analysis import hysteresis
+
+    c = tfm.simulate(Params(spacing=1 / 64, control="force", f_th=None, **STANDARD)).curve
+    jump, after = c.iloc[-2], c.iloc[-1]
+    assert after["n_contact"] == 0 and jump["n_contact"] > 0 and jump["force"] < 0
+    assert after["d"] == jump["d"] and after["indent"] == jump["indent"]
+    assert after["force"] == 0.0 and np.signbit(after["force"]) == False  # noqa: E712
+    assert hysteresis(c) == hysteresis(c.iloc[:-1])     # the drop adds no area
+
+
 def test_held_loads_are_the_targets():
     """Each held step carries its target load: the Newton step on a fixed contact set is exact."""
     p = Params(spacing=1 / 32, control="force", load_step=2e-4, **STANDARD, f_th=None)

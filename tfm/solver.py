@@ -313,6 +313,7 @@ class ContactState:
         if (self.contact & prob.edge).any():
             out.edge_steps += 1
         out.solver_iters += iters
-        return StepRecord(k, phase, d, -float(self.F.sum()), float(prob.area[self.contact].sum()),
+        # 0.0 - sum: no contact gives P = +0.0, not -0.0 (printed "P = -0")
+        return StepRecord(k, phase, d, 0.0 - float(self.F.sum()), float(prob.area[self.contact].sum()),
                           int(self.contact.sum()), snapped, entered, rounds, iters)
 
