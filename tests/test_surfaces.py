@@ -197,6 +197,31 @@ def test_height_map_lands_on_springs_and_interpolates(tmp_path):
     np.testing.assert_allclose(heights(q, lay), expect - expect.max(), atol=1e-15)
 
 
+def test_contact_at_a_cropped_side_of_a_height_map_is_flagged(tmp_path, capsys):
+    """A map is a finite body: contact at its own edge is physical. But a grid cut short
+    of the map, by extent or as the centred square of an oblong map, was never flagged:
+    a paraboloid map cut to extent 0.15 under a 0.2-wide contact gave a 4 % lower force
+    and exit 0, where the same cut paraboloid is flagged. Now contact at a cut side is,
+    and at the map's own edge still is not; an oblong map's unused pixels are noted."""
+    from tfm import simulate
+    from tfm.cli import main
+
+    xs = (np.arange(65) - 32) / 64
+    bowl = -(xs[:, None] ** 2 + xs[None, :] ** 2) / 2.0          # the paraboloid R = 1, +-0.5
+    kw = dict(shape="height_map", spacing=1 / 32, f_th=0.0, max_indent=0.05, step=1e-3, map_pixel_size=1 / 64)
+    with pytest.warns(UserWarning, match="grid edge"):
+        cut = simulate(height_map=_map(tmp_path, "bowl.npy", array=bowl), extent=0.15, **kw)
+    assert cut.summary["contact_reached_edge"]
+    whole = simulate(height_map=_map(tmp_path, "small.npy", array=bowl[16:49, 16:49]), **kw)
+    assert whole.summary["max_contact_radius"] > 0.2 and not whole.summary["contact_reached_edge"]
+    strip = _map(tmp_path, "strip.npy", array=bowl[16:49, :])     # +-0.25 along x, +-0.5 along y
+    out = tmp_path / "strip.parquet"
+    assert main(["run", "--shape", "height_map", "--height-map", strip, "--map-pixel-size", "1/64",
+                 "--spacing", "1/32", "--f-th", "0", "--max-indent", "0.05", "--step", "1e-3", "-o", str(out),
+                 "--no-plot"]) == 0                       # its contact stays off the cut sides
+    assert "its pixels beyond the square are not used" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("array, match", [
     (np.zeros((5, 5, 2)), "2-D"),
     (np.full((41, 41), np.nan), "NaN"),

@@ -224,6 +224,11 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
               f"{body} shape={p.shape} kernel={p.kernel} operator={p.operator} "
               f"max_indent={p.delta_max:.4g} ({n_loading_steps(p)} loading steps), "
               f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
+        if p.shape == "height_map" and p.extent is None:
+            from .surfaces import map_unused_note
+            note = map_unused_note(p)     # information, not a flag: the edge flag covers the physics
+            if note:
+                print(f"tfm: note: {note}", file=sys.stderr)
     for note in notes:                    # stated before the run starts
         print(f"tfm: warning: {note}", file=sys.stderr)
     with warnings.catch_warnings(record=True) as caught, run_progress(p, quiet=args.quiet) as progress:

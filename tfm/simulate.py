@@ -28,8 +28,11 @@ def build_problem(p: Params) -> tuple[Problem, object]:
     op = make_operator(p, spec, layout, symbol)
     pre = make_preconditioner(p, spec, layout, symbol, op)
     # A height map is a finite body whose edge is the map's: contact there is physical,
-    # not a sign of a too-small grid.
-    edge = np.zeros_like(layout.edge) if p.shape == "height_map" else layout.edge
+    # not a sign of a too-small grid; where the grid crops the map, it is that sign.
+    edge = layout.edge
+    if p.shape == "height_map":
+        from .surfaces import map_cropped_edge
+        edge = map_cropped_edge(p, layout.x, layout.y, layout.edge)
     prob = Problem(x0=heights(p, layout), f_th=threshold_forces(p, layout.area), area=layout.area, edge=edge,
                    operator=op, precond=pre, tol=p.tol, max_iter=p.max_iter,
                    max_rounds=p.max_rounds, snap_rule=p.snap_rule)

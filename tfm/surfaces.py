@@ -356,6 +356,42 @@ def map_half_width(p, hm: HeightMap) -> float:
     return math.floor(avail / p.spacing + 1e-9) * p.spacing
 
 
+def map_cropped_edge(p, x: np.ndarray, y: np.ndarray, edge: np.ndarray) -> np.ndarray:
+    """The springs of the grid's outer ring (``edge``) on the sides where the grid stops
+    short of the map's own edge, by ``extent`` or as the centred square of an oblong map.
+    Contact there is a sign of a too-small grid, as for the other shapes; contact at the
+    map's own edge is physical (a finite body), and is not flagged."""
+    hm = load_height_map(p.height_map)
+    a = map_pixel(p, hm)
+    nx, ny = hm.heights.shape
+    cx, cy = (nx - 1) // 2, (ny - 1) // 2
+    hw = float(max(np.abs(x).max(), np.abs(y).max())) if x.size else 0.0
+    near = 1.5 * p.spacing                                    # as wide as the ring (geometry)
+    cut = lambda room: room >= p.spacing * (1 - 1e-9)        # another ring of springs fits
+    sides = ((cut((nx - 1 - cx) * a - hw), x >= hw - near), (cut(cx * a - hw), x <= -hw + near),
+             (cut((ny - 1 - cy) * a - hw), y >= hw - near), (cut(cy * a - hw), y <= -hw + near))
+    mask = np.zeros(x.shape, dtype=bool)
+    for cropped, on_side in sides:
+        if cropped:
+            mask |= on_side
+    return edge & mask
+
+
+def map_unused_note(p) -> str | None:
+    """A note if the automatic grid, the map's largest centred square, leaves part of an
+    oblong map unused (None otherwise)."""
+    hm = load_height_map(p.height_map)
+    a = map_pixel(p, hm)
+    nx, ny = hm.heights.shape
+    reach_x, reach_y = max((nx - 1) // 2, nx - 1 - (nx - 1) // 2) * a, max((ny - 1) // 2, ny - 1 - (ny - 1) // 2) * a
+    hw = p.half_width
+    if max(reach_x, reach_y) - hw < p.spacing * (1 - 1e-9):
+        return None
+    return (f"height_map: the grid is the map's largest centred square (half-width {hw:.4g}); the map "
+            f"({nx} x {ny} pixels) reaches {reach_x:.4g} along x and {reach_y:.4g} along y, and its pixels "
+            "beyond the square are not used")
+
+
 def map_heights(p, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """The run's height map at the spring positions."""
     hm = load_height_map(p.height_map)
