@@ -20,6 +20,7 @@ from tfm import Params, simulate
 from tfm.campaign import (CampaignError, CampaignStore, load_spec, load_tables, run_campaign,
                           spec_from_dict)
 from tfm.checkpoint import CheckpointWarning
+from tfm.params import ParameterError
 from tfm.cli import main as tfm_main
 
 # 20 loading steps and about as many unloading ones: a second or two.
@@ -130,8 +131,7 @@ def test_ctrl_c_saves_the_step_in_progress(reference, tmp_path, capsys, at):
 
 def test_sigterm_saves_the_step_in_progress_then_ends_the_process(tmp_path):
     """SIGTERM (a cluster's time limit, `kill`) killed a run at once. Now the process ends
-    the same way, by SIGTERM, after saving the step in progress; a second signal would not
-    wait. Without a checkpoint there is nothing to save and nothing changes."""
+    the same way, by SIGTERM, after saving the step in progress."""
     path = tmp_path / "run.npz"
     code = ("import os, signal; from tfm import Params, simulate\n"
             f"P = Params(spacing=1/32, k_th=0.02, f_th=None, shape='paraboloid', max_indent=0.02, step=1e-3)\n"
@@ -147,12 +147,20 @@ def test_sigterm_saves_the_step_in_progress_then_ends_the_process(tmp_path):
 
 
 def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path, monkeypatch):
+    """Another run's saved state, or a file that is no checkpoint, at the path given was
+    set aside with a warning, then overwritten and deleted: a user's own results.npz was
+    lost. Now it is refused and left alone (as `tfm run` does without --overwrite) unless
+    replace_checkpoint=True; this run's state by another engine is still set aside."""
     path = tmp_path / "run.npz"
     other = P.replace(alpha=0.5)
     with pytest.raises(Stop):
         simulate(other, progress=stop_after(5), checkpoint=path, checkpoint_every=0)
+    saved = path.read_bytes()
+    with pytest.raises(ParameterError, match=f"holds the saved state of another run \\({other.run_id}\\)"):
+        simulate(P, checkpoint=path)
+    assert path.read_bytes() == saved
     with pytest.warns(CheckpointWarning, match=f"belongs to run '{other.run_id}'.*starts afresh"):
-        res = simulate(P, checkpoint=path)
+        res = simulate(P, checkpoint=path, replace_checkpoint=True)
     assert res.provenance["resumed_at_step"] == 0
     assert_same_run(res, reference)
 
@@ -164,8 +172,13 @@ def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path,
     assert res.provenance["resumed_at_step"] == 0
 
     path.write_bytes(b"not a checkpoint")
-    with pytest.warns(CheckpointWarning, match="cannot be read"):
+    with pytest.raises(ParameterError, match="holds a file that is not a readable checkpoint; it is left alone"):
         simulate(P, checkpoint=path)
+    assert path.read_bytes() == b"not a checkpoint"
+    with pytest.warns(CheckpointWarning, match="cannot be read"):
+        simulate(P, checkpoint=path, replace_checkpoint=True)
+    with pytest.raises(ParameterError, match="keep_checkpoint: applies only with a checkpoint path"):
+        simulate(P, keep_checkpoint=True)
 
 
 @pytest.mark.parametrize("changes, options, expected", [

@@ -209,6 +209,20 @@ def test_plot_and_show_from_a_stored_run(stored_run, capsys):
     assert "nearest stored steps" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("view", [["plot"], ["show", "--step", "pull_off"]])
+def test_a_file_given_with_o_is_replaced_only_with_overwrite(stored_run, tmp_path, capsys, view):
+    """`tfm plot RUN -o mine.png` replaced an existing mine.png without a word, where
+    `tfm run` asks for --overwrite. The default beside the run is its own figure, redrawn."""
+    mine = tmp_path / "mine.png"
+    mine.write_bytes(b"someone's figure")
+    argv = [view[0], str(stored_run), *view[1:], "-o", str(mine)]
+    assert main(argv) == 2
+    assert "mine.png exists; pass --overwrite to replace it" in capsys.readouterr().err
+    assert mine.read_bytes() == b"someone's figure"
+    assert main([*argv, "--overwrite"]) == 0 and mine.stat().st_size > 10_000
+    assert main([view[0], str(stored_run), *view[1:]]) == 0 == main([view[0], str(stored_run), *view[1:]])
+
+
 def test_animate_makes_a_gif_with_one_frame_per_unloading_snapshot(stored_run, tmp_path):
     from PIL import Image
 

@@ -181,7 +181,7 @@ def _checkpoint_options(args, p: Params, out: Path) -> dict:
             raise ParameterError(f"checkpoint-every: {reason}")
     path = checkpoint_path_for(out)
     _check_foreign_checkpoint(path, p, args.overwrite)
-    return {"checkpoint": path, "checkpoint_every": every}
+    return {"checkpoint": path, "checkpoint_every": every, "replace_checkpoint": args.overwrite}
 
 
 def _check_foreign_checkpoint(path: Path, p: Params, overwrite: bool) -> None:

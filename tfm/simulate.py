@@ -41,6 +41,7 @@ def build_problem(p: Params) -> tuple[Problem, object]:
 
 def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkpoint=None,
              checkpoint_every: float = CHECKPOINT_EVERY, keep_checkpoint: bool = False,
+             replace_checkpoint: bool = False,
              **overrides) -> RunResult:
     """Run the loading protocol of ``p.control`` (tfm.protocol). ``simulate(spacing=1/64,
     k_th=0.02)`` and ``simulate(Params(...))`` both work. Suspect results carry flags and warn.
@@ -53,7 +54,11 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     is saved there every ``checkpoint_every`` seconds, a saved state of this run is
     continued from (same curve, bit for bit), and the file is removed when the run ends,
     unless ``keep_checkpoint``: then the caller removes it once it has stored the result (a
-    campaign worker's result may yet be lost on its way to the campaign process)."""
+    campaign worker's result may yet be lost on its way to the campaign process). A file
+    there that is not this run's saved state (another run's, or no checkpoint at all) is
+    refused, and left alone, unless ``replace_checkpoint``: then it is set aside with a
+    warning and replaced. This run's state saved by another version of tfm is always set
+    aside (it cannot promise the same numbers)."""
     from . import protocol
 
     if p is None:
@@ -63,9 +68,13 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     # arguments that would be silently ignored are refused
     if fields_path is not None and p.snapshots == "none":
         raise ParameterError("fields_path: applies only with snapshots = 'events' or K (this run stores none)")
-    if checkpoint is None and checkpoint_every != CHECKPOINT_EVERY:
-        raise ParameterError("checkpoint_every: applies only with a checkpoint path (checkpoint=...)")
-    ckpt = _checkpoint(p, checkpoint, checkpoint_every) if checkpoint is not None else None
+    if checkpoint is None:
+        for name, value, default in (("checkpoint_every", checkpoint_every, CHECKPOINT_EVERY),
+                                     ("keep_checkpoint", keep_checkpoint, False),
+                                     ("replace_checkpoint", replace_checkpoint, False)):
+            if value != default:
+                raise ParameterError(f"{name}: applies only with a checkpoint path (checkpoint=...)")
+    ckpt = _checkpoint(p, checkpoint, checkpoint_every, replace_checkpoint) if checkpoint is not None else None
     notes = check(p)                   # refuses a meaningless or oversized run up front
     for note in notes:
         warnings.warn(f"run {p.run_id}: {note}", RunWarning, stacklevel=2)
@@ -115,12 +124,19 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     return res
 
 
-def _checkpoint(p: Params, path, every: float) -> Checkpoint:
-    """The run's checkpoint, refused before any computation where it cannot serve."""
+def _checkpoint(p: Params, path, every: float, replace: bool) -> Checkpoint:
+    """The run's checkpoint, refused before any computation where it cannot serve, or
+    where it would replace a file that is not this run's saved state (unless ``replace``)."""
     reason = why_not(p)
     if reason:
         raise ParameterError(f"checkpoint: {reason}")
     ckpt = Checkpoint(path, p.run_id, every)
+    if not replace and ckpt.path.exists():
+        owner = ckpt.saved_run_id()
+        if owner != p.run_id:
+            what = f"the saved state of another run ({owner})" if owner else "a file that is not a readable checkpoint"
+            raise ParameterError(f"checkpoint: {ckpt.path} holds {what}; it is left alone: delete it, give "
+                                 "another path, or replace_checkpoint=True to replace it")
     try:
         ckpt.path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -25,6 +25,7 @@ def register(sub) -> None:
                           description="Redraw the force-indentation figure of a stored run.")
     plot.add_argument("run", help="curve .parquet, a folder with one, or a campaign run id")
     plot.add_argument("-o", "--output", help="PNG/PDF/SVG path (default: beside the curve, .png)")
+    _overwrite_flag(plot)
     plot.set_defaults(func=cmd_plot)
 
     show = sub.add_parser("show", help="contact map of a stored field snapshot",
@@ -35,6 +36,7 @@ def register(sub) -> None:
     show.add_argument("--step", default="pull_off",
                       help=f"a stored step number, or an event: {', '.join(EVENT_NAMES)} (default pull_off)")
     show.add_argument("-o", "--output", help="image path (default: <stem>.step<k>.png beside the curve)")
+    _overwrite_flag(show)
     show.set_defaults(func=cmd_show)
 
     anim = sub.add_parser("animate", help="GIF/MP4 of the unloading from stored snapshots",
@@ -45,7 +47,14 @@ def register(sub) -> None:
     anim.add_argument("-o", "--output", help="a .gif (Pillow) or .mp4 (needs ffmpeg); default <stem>.gif")
     anim.add_argument("--fps", type=float, default=8.0, help="frames per second (default 8; at most 100 for a GIF)")
     anim.add_argument("--all-phases", action="store_true", help="loading too, not only the unloading")
+    _overwrite_flag(anim)
     anim.set_defaults(func=cmd_animate)
+
+
+def _overwrite_flag(parser) -> None:
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an existing file given with -o (the default beside the run is "
+                             "the run's own figure, and is always replaced)")
 
 
 # ---- finding and loading a stored run -------------------------------------------------
@@ -188,12 +197,14 @@ def _guard(fn, args) -> int:
 
 def _output(args, default: Path, suffixes: tuple[str, ...]) -> Path:
     """-o (or the default beside the run) checked before anything is drawn: a suffix that
-    no writer takes failed after the drawing, with a traceback."""
+    no writer takes failed after the drawing, with a traceback. A file given with -o is
+    not replaced without --overwrite (it may be anything); the default is the run's own
+    figure, drawn again."""
     from .cli import OutputError, check_output
 
     out = Path(args.output) if args.output else default
     try:
-        check_output(out, "-o", suffixes, overwrite=True, create=True)
+        check_output(out, "-o", suffixes, overwrite=args.overwrite or not args.output, create=True)
     except OutputError as exc:
         raise ViewError(str(exc)) from None
     return out

@@ -276,7 +276,7 @@ def _checkpoint_args(params, ckpt) -> dict:
     store, every = ckpt
     # kept until the campaign process has stored the run (CampaignStore.write_run)
     return {"checkpoint": store.checkpoint_path(params.run_id), "checkpoint_every": every,
-            "keep_checkpoint": True}
+            "keep_checkpoint": True, "replace_checkpoint": True}
 
 
 def _set_threads(threads: int, set_env: bool = True) -> None:
