@@ -4,7 +4,7 @@ import math
 import pytest
 
 from tfm import ParameterError, Params
-from tfm.params import parse_number
+from tfm.params import ParameterWarning, parse_number
 
 
 @pytest.mark.parametrize("kw, match", [
@@ -25,7 +25,9 @@ from tfm.params import parse_number
     (dict(max_indent=2.0), "max_indent: must be < radius"),
     (dict(step=0.1, max_indent=0.05), "step: must be <= max_indent"),
     (dict(step=0.0), "step: must be > 0"),
-    (dict(tol=0.5), "tol: must be > 0 and <= 0.01"),
+    (dict(tol=0.5), r"tol: must be in \[1e-15, 1e-2\], got 0.5"),
+    # CG's recursive residual fell on below rounding, and at 1e-200 divided by zero mid-run
+    (dict(tol=1e-200), r"tol: must be in \[1e-15, 1e-2\], got 1e-200"),
     (dict(neighbor_rings=0), r"neighbor_rings: must be in \[1, 64\]"),
     (dict(neighbor_rings=1.5), "neighbor_rings: expected an integer"),
     (dict(layout="hexagonal"), "operator: 'fft' needs a regular square grid"),
@@ -140,3 +142,60 @@ def test_simulate_refuses_arguments_it_would_ignore(tmp_path):
     with pytest.raises(ParameterError, match="checkpoint_every: applies only with a checkpoint"):
         tfm.simulate(spacing=1 / 16, k_th=0.02, step=2e-3, checkpoint_every=5)
     assert not list(tmp_path.iterdir())
+
+
+# ---- found by a user-style hunt for silently accepted input (2026-11-24) ------------------
+ROUGH = dict(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05, step=1e-3, rms_height=1e-3)
+
+
+@pytest.mark.parametrize("kw, match", [
+    # fourier_synthesis raised "no wavevector between the cutoffs" mid-setup, with a traceback
+    (dict(ROUGH, short_cutoff=10.0), r"short_cutoff: must be <= the grid side \(0\.90625\)"),
+    # the grid's automatic preload was 10 steps and the guard advised "Use step <= 0"
+    (dict(spacing="1/128", f_th=0.0, shape="paraboloid"), "max_indent: 'auto' sizes the preload by the adhesion"),
+    # rolloff sets the PSD below long_cutoff only: without it, three values drew one surface
+    (dict(ROUGH, extent=0.5, rolloff=0.3), "rolloff: 0.3 has no effect here; it applies only when the surface "
+                                          "is rough and long_cutoff is given"),
+    # a seed beyond int64 computed, and then no campaign table could ever be written
+    (dict(ROUGH, roughness_seed=2 ** 64 + 1), r"roughness_seed: must be in \[0, 9223372036854775807\]"),
+    # force control: 1e10 load steps started; the depth's errors named max_indent, not max_load
+    (dict(ROUGH, rms_height=0.0, control="force", max_indent=0.05, load_step=1e-12),
+     r"load_step: the peak load / load_step = 4\.\d+e\+09 load steps; must be <= 1e\+06"),
+    (dict(ROUGH, rms_height=0.0, max_indent="auto", control="force", max_load=1e-12),
+     r"step: must be <= the depth of max_load 1e-12"),
+])
+def test_input_that_ran_or_crashed_is_refused_before_computing(kw, match):
+    with pytest.raises(ParameterError, match=match):
+        Params.from_dict(kw)
+
+
+def test_a_rough_surface_runs_under_force_control_with_a_max_load():
+    """'auto' was refused for a rough body ('give a number') and a number refused under
+    force control with a max_load ('leave max_indent auto'): no way to run it. With a
+    max_load, 'auto' is that load's depth, which only sizes the grid."""
+    p = Params.from_dict(dict(ROUGH, max_indent="auto", control="force", max_load=0.01, extent=0.5))
+    assert p.delta_max > 0
+
+
+def test_integers_given_as_text_are_read_exactly():
+    """'9007199254740993' went through a float and became ...992 (another run id than the
+    same seed written as a number)."""
+    kw = dict(spacing="1/32", k_th=0.02, threshold_disorder="uniform", disorder_width=0.2)
+    assert Params.from_dict({**kw, "disorder_seed": "9007199254740993"}).disorder_seed == 2 ** 53 + 1
+    assert (Params.from_dict({**kw, "disorder_seed": "12"}).run_id
+            == Params.from_dict({**kw, "disorder_seed": 12}).run_id)
+
+
+@pytest.mark.parametrize("kw, names", [
+    (dict(k_th=0.0, alpha=0.5), ["alpha"]),
+    (dict(f_th=0.0, threshold_disorder="weibull", disorder_width=0.3), ["threshold_disorder", "disorder_width"]),
+])
+def test_values_that_change_nothing_without_adhesion_are_warned_about(kw, names):
+    """With every threshold zero, the exponent and a disorder around it do nothing, yet
+    gave other run ids without a word. Warned, not refused: a campaign may sweep k_th
+    through 0 with the rest fixed."""
+    with pytest.warns(ParameterWarning) as caught:
+        Params.from_dict(dict(spacing="1/32", shape="paraboloid", max_indent=0.05, step=1e-3, **kw))
+    said = [str(w.message) for w in caught]
+    for name in names:
+        assert f"{name}: given but has no effect here: every threshold is zero (no adhesion)" in said

@@ -254,11 +254,15 @@ class Params:
         except ParameterError as exc:
             raise ParameterError(f"{prefix}{exc}") from None
         # a complete record (a stored one, read back) carries every default: no warnings
-        for name in (clean if set(clean) != set(names) else ()):
+        given = clean if set(clean) != set(names) else {}
+        for name in given:
             rule = APPLIES.get(name)
             if rule is not None and not rule.applies(params) and not rule.also(params):
                 warnings.warn(f"{name}: given but has no effect; it applies only when {rule.when}",
                               ParameterWarning, stacklevel=2)
+        for name, why in _moot(params):
+            if name in given and given[name] != _DEFAULTS[name]:
+                warnings.warn(f"{name}: given but has no effect here: {why}", ParameterWarning, stacklevel=2)
         return params
 
     @classmethod
@@ -381,14 +385,15 @@ APPLIES: dict[str, Applies] = {
                      lambda p: p.operator == "tree" and p.kernel == "boussinesq"),
     "jitter": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
     "seed": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
-    "extent_margin": Applies("extent is automatic (extent = none)", lambda p: p.extent is None),
     "max_load": Applies("control='force'", lambda p: p.control == "force"),
     "load_step": Applies("control='force'", lambda p: p.control == "force"),
     "extent_margin": Applies("extent is automatic (extent = none) and shape is not 'height_map'",
                              lambda p: p.extent is None and p.shape != "height_map"),
     # roughness, height maps, threshold disorder, units (tfm.surfaces, tfm.threshold, tfm.units)
     **{name: Applies("the surface is rough (rms_slope or rms_height > 0)", lambda p: _rough(p))
-       for name in ("hurst", "short_cutoff", "long_cutoff", "rolloff", "roughness_seed")},
+       for name in ("hurst", "short_cutoff", "long_cutoff", "roughness_seed")},
+    "rolloff": Applies("the surface is rough and long_cutoff is given (rolloff sets the PSD below it)",
+                       lambda p: _rough(p) and p.long_cutoff is not None),
     "radius": Applies("shape is 'sphere', 'paraboloid' or 'flat_punch'", lambda p: p.shape != "height_map"),
     **{name: Applies("shape='height_map'", lambda p: p.shape == "height_map")
        for name in ("height_map", "map_pixel_size", "height_map_hash")},
@@ -399,6 +404,20 @@ APPLIES: dict[str, Applies] = {
     "k_th_coefficient": Applies("units='si' and work_of_adhesion is given",
                                 lambda p: p.units == "si" and p.work_of_adhesion is not None),
 }
+
+
+def _moot(p: Params) -> list[tuple[str, str]]:
+    """Parameters that apply but whose values change nothing in this run: with every
+    threshold zero, the exponent and the disorder around it. Warned about (from_dict), not
+    refused: a campaign may sweep k_th through 0 with the rest fixed."""
+    zero = p.f_th == 0 or (p.f_th is None and p.k_th == 0) or (p.units == "si" and p.work_of_adhesion == 0)
+    if not zero:
+        return []
+    why = "every threshold is zero (no adhesion)"
+    # with an explicit f_th, alpha already applies only as 0 (APPLIES)
+    names = (["alpha"] if p.f_th is None else []) + (["threshold_disorder", "disorder_width", "disorder_seed"]
+                                                      if p.threshold_disorder != "none" else [])
+    return [(name, why) for name in names]
 
 
 def _check_applies(p: Params) -> None:
@@ -461,6 +480,8 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
         if kind == "int":
             if isinstance(value, numbers.Integral) and not isinstance(value, bool):
                 return int(value)
+            if isinstance(value, str) and re.fullmatch(r"[+-]?\d+", value.strip()):
+                return int(value.strip())   # exact: through a float, 2**53 + 1 became 2**53
             number = parse_number(value, key)
             if not number.is_integer():
                 raise ParameterError(f"{key}: expected a whole number, got {value!r}")
@@ -492,10 +513,20 @@ def _choice(name: str, value: Any, allowed: tuple[str, ...]) -> None:
         raise ParameterError(f"{name}: unknown value {value!r}; allowed: {', '.join(allowed)}{hint}")
 
 
+#: smallest tol: double precision rounds a force to 1.1e-16 of itself, so no solution's
+#: residual lies much below 10x that (the solves reach 1e-15 at 1/32 and 1/128)
+MIN_TOL = 1e-15
+
+#: most loading steps of a run (max_indent / step, or force control's peak load / load_step)
+MAX_STEPS = 1e6
+
 #: largest max_iter, max_rounds, max_unload_steps: the compiled loop holds them (and
 #: counts up to them) in int64, and a cap beyond int64 overflowed there (zero CG
 #: iterations, or a Numba error mid-run); 2^31 - 1 is far beyond any run that ends
 MAX_CAP = 2 ** 31 - 1
+#: largest seed: the tables store seeds as int64 (a larger one computed, and then no table
+#: could be written)
+MAX_SEED = 2 ** 63 - 1
 
 
 def _integer(name: str, value: Any, low: int, high: int | None = None) -> None:
@@ -538,12 +569,15 @@ def _validate(p: Params) -> None:
     j = _finite("jitter", p.jitter)
     if not 0.0 <= j < 0.5:
         raise ParameterError(f"jitter: must be in [0, 0.5) spacings so springs never cross, got {j!r}")
-    _integer("seed", p.seed, 0)
+    _integer("seed", p.seed, 0, MAX_SEED)
     if p.max_indent != "auto":
         _positive("max_indent", p.max_indent)
     _positive("step", p.step)
     _choice("snap_rule", p.snap_rule, SNAP_RULES)
-    _positive("tol", p.tol, upper=1e-2)
+    if not MIN_TOL <= _finite("tol", p.tol) <= 1e-2:
+        raise ParameterError(f"tol: must be in [{MIN_TOL:g}, 1e-2], got {p.tol!r} (below {MIN_TOL:g} the residual "
+                             "is under the rounding of the forces themselves: CG's recursive residual falls on "
+                             "and reports what no solution has, and at 1e-200 it underflowed to a division by zero)")
     _integer("max_iter", p.max_iter, 1, MAX_CAP)
     _integer("max_rounds", p.max_rounds, 1, MAX_CAP)
     if p.max_unload_steps is not None:
@@ -556,10 +590,13 @@ def _validate(p: Params) -> None:
     _validate_surface(p)
     # relations between parameters
     dmax = p.delta_max
+    # under force control with a max_load the depth is that load's (Hertz or punch)
+    depth = (f"the depth of max_load {p.max_load:g} ({dmax:.3g})"
+             if p.control == "force" and p.max_load is not None else f"max_indent ({dmax:g})")
     if p.step > dmax:
-        raise ParameterError(f"step: must be <= max_indent ({dmax:g}), got {p.step!r}")
-    if dmax / p.step > 1e6:
-        raise ParameterError(f"step: max_indent/step = {dmax / p.step:.3g} steps; must be <= 1e6")
+        raise ParameterError(f"step: must be <= {depth}, got {p.step!r}")
+    if dmax / p.step > MAX_STEPS:
+        raise ParameterError(f"step: {depth} / step = {dmax / p.step:.3g} steps; must be <= {MAX_STEPS:g}")
     if p.shape == "sphere" and dmax >= p.radius:
         raise ParameterError(f"max_indent: must be < radius ({p.radius:g}) for a sphere, got {dmax!r}")
     hw = p.half_width
@@ -627,6 +664,9 @@ def _validate_protocol(p: Params) -> None:
 
 
 def _validate_protocol_relations(p: Params) -> None:
+    if p.control == "force" and p.peak_load / p.load_decrement > MAX_STEPS:
+        raise ParameterError(f"load_step: the peak load / load_step = {p.peak_load / p.load_decrement:.3g} load "
+                             f"steps; must be <= {MAX_STEPS:g}")
     if p.control == "force" and p.load_step is not None:
         if p.load_step > p.peak_load:
             unit = " N" if p.units == "si" else ""
@@ -667,10 +707,16 @@ def _validate_surface(p: Params) -> None:
                                  + ("" if p.short_cutoff is not None else " (the default, 4 spacings)"))
     if _finite("rolloff", p.rolloff) < 0:
         raise ParameterError(f"rolloff: must be >= 0 (PSD below long_cutoff = rolloff^2 C(q_L)), got {p.rolloff!r}")
-    _integer("roughness_seed", p.roughness_seed, 0)
-    if rough and p.max_indent == "auto":
+    _integer("roughness_seed", p.roughness_seed, 0, MAX_SEED)
+    # under force control with a max_load, 'auto' is that load's depth (it sizes the grid)
+    by_load = p.control == "force" and p.max_load is not None
+    if rough and p.max_indent == "auto" and not by_load:
         raise ParameterError("max_indent: 'auto' assumes a smooth body; give a number for a rough surface "
                              "(e.g. the smooth auto value plus 3 rms heights)")
+    if (p.max_indent == "auto" and not by_load and p.shape in ("sphere", "paraboloid")
+            and p.threshold_force == 0.0):
+        raise ParameterError("max_indent: 'auto' sizes the preload by the adhesion (the JKR contact radius); "
+                             "with no adhesion (every F_th = 0) give a number")
     # height map
     is_map = p.shape == "height_map"
     if is_map and p.height_map is None:
@@ -701,14 +747,17 @@ def _validate_surface(p: Params) -> None:
     lo, hi = WEIBULL_WIDTH_RANGE
     if p.threshold_disorder == "weibull" and not lo <= w <= hi:
         raise ParameterError(f"disorder_width: must be in [{lo:g}, {hi:g}] for 'weibull' (std/mean), got {w!r}")
-    _integer("disorder_seed", p.disorder_seed, 0)
+    _integer("disorder_seed", p.disorder_seed, 0, MAX_SEED)
 
 
 def _validate_surface_relations(p: Params) -> None:
     """Roughness and map checks against the grid (after the extent is known)."""
     hw = p.half_width
+    side = (2 * math.ceil(hw / p.spacing - 1e-9) + 1) * p.spacing
+    if _rough(p) and p.short_cutoff is not None and p.short_cutoff > side * (1 + 1e-12):
+        raise ParameterError(f"short_cutoff: must be <= the grid side ({side:g}): no wavelength of the grid is "
+                             f"longer than its side, so none would be left, got {p.short_cutoff!r}")
     if p.long_cutoff is not None:
-        side = (2 * math.ceil(hw / p.spacing - 1e-9) + 1) * p.spacing
         if p.long_cutoff > side * (1 + 1e-12):
             raise ParameterError(f"long_cutoff: must be <= the grid side ({side:g}); no wavevector of the "
                                  f"grid lies below a longer cutoff, got {p.long_cutoff!r}")
