@@ -38,6 +38,20 @@ def test_hertz_unloading_retraces_loading(hertz_run):
     assert res.summary["pull_off_force"] < 1e-3 * load.max()
 
 
+def test_a_contact_that_never_pulls_has_no_pull_off(hertz_run):
+    """Without tension at any step there is no pull-off: its force is +0.0 (it was -0.0),
+    its indent and radius NaN (they were those of an arbitrary step at P = 0), and the
+    figure draws no snap-off jump."""
+    from tfm.plots import split_snap_off
+
+    _, res = hertz_run
+    s, c = res.summary, res.curve
+    assert (-c["force"]).max() <= 0.0
+    assert s["pull_off_force"] == 0.0 and not np.signbit(s["pull_off_force"])
+    assert np.isnan(s["pull_off_indent"]) and np.isnan(s["pull_off_contact_radius"])
+    assert split_snap_off(c[c["phase"] == "unload"])[1] is None
+
+
 def test_sphere_approaches_paraboloid_at_small_indentation():
     kw = dict(spacing="1/64", f_th=0.0, radius=1.0, max_indent=0.01, step=1e-3)
     sph = simulate(Params.from_dict(dict(kw, shape="sphere"))).curve

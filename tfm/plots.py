@@ -228,8 +228,10 @@ def styled(func):
 
 def split_snap_off(part):
     """The rows in contact, and the final row after the last snap (None if there is none):
-    a jump, to be drawn as one, not as a line through intermediate states."""
-    if len(part) and int(part["n_contact"].iloc[-1]) == 0 and len(part) > 1:
+    a jump, to be drawn as one, not as a line through intermediate states. A contact that
+    ends without tension (no adhesion) simply closes: no snap-off is drawn."""
+    if (len(part) > 1 and int(part["n_contact"].iloc[-1]) == 0
+            and float(part["force"].iloc[-2]) < 0.0):
         return part.iloc[:-1], part.iloc[-2:]
     return part, None
 

@@ -182,6 +182,9 @@ def summarize(curve, out, p: Params, n_springs: int, grid_side: int | None) -> d
     unload = col["phase"] == "unload"
     tension = -col["force"]
     k = int(np.argmax(tension)) if n else 0
+    # no tension at any step (no adhesion): no pull-off, so no indent or radius for it (the
+    # argmax picked some step at P = 0: -0.0 and a radius of 0.018 at 1/32)
+    pulled = n > 0 and tension[k] > 0.0
     warnings = []
     if out.edge_steps:
         grow = "enlarge extent" if p.extent is not None else "raise extent_margin or give a larger extent"
@@ -209,9 +212,9 @@ def summarize(curve, out, p: Params, n_springs: int, grid_side: int | None) -> d
         "jump_off_force": float(-col["force"][j]) if jump else math.nan,
         "jump_off_contact_radius": float(col["contact_radius"][j]) if jump else math.nan,
         "jump_off_indent": float(col["indent"][j]) if jump else math.nan,
-        "pull_off_force": float(max(tension[k], 0.0)) if n else 0.0,
-        "pull_off_indent": float(col["indent"][k]) if n else math.nan,
-        "pull_off_contact_radius": float(col["contact_radius"][k]) if n else math.nan,
+        "pull_off_force": float(tension[k]) if pulled else 0.0,
+        "pull_off_indent": float(col["indent"][k]) if pulled else math.nan,
+        "pull_off_contact_radius": float(col["contact_radius"][k]) if pulled else math.nan,
         # force control: the depth the peak load reached (delta_max only sized the grid)
         "max_indent": (float(col["indent"].max()) if n else 0.0) if p.control == "force"
         else p.delta_max,
