@@ -1,6 +1,7 @@
 """Rough surfaces (tfm.surfaces): the generator's statistics, seeds, SurfaceTopography,
 height maps, threshold disorder and the early refusal of bad input."""
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -195,6 +196,21 @@ def test_height_map_lands_on_springs_and_interpolates(tmp_path):
     lay = make_layout(q)
     expect = 0.01 * lay.x + 0.02 * lay.y
     np.testing.assert_allclose(heights(q, lay), expect - expect.max(), atol=1e-15)
+
+
+def test_a_npy_map_without_a_pixel_size_is_warned_about(tmp_path):
+    """A .npy map's pixel defaults to the spacing, so a spacing study of one map compared
+    bodies of different sizes (a paraboloid map gave R = 1 at 1/64 and R = 4 at 1/32),
+    without a word."""
+    from tfm.params import ParameterWarning
+
+    kw = dict(shape="height_map", height_map=_map(tmp_path), spacing="1/32", f_th=0.0, max_indent=1e-3,
+              step=1e-4)
+    with pytest.warns(ParameterWarning, match="map_pixel_size: not given, and the map carries none"):
+        Params.from_dict(kw)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Params.from_dict({**kw, "map_pixel_size": "1/32"})
 
 
 def test_contact_at_a_cropped_side_of_a_height_map_is_flagged(tmp_path, capsys):

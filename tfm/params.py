@@ -263,6 +263,13 @@ class Params:
         for name, why in _moot(params):
             if name in given and given[name] != _DEFAULTS[name]:
                 warnings.warn(f"{name}: given but has no effect here: {why}", ParameterWarning, stacklevel=2)
+        if "height_map" in given and "map_pixel_size" not in given and params.shape == "height_map":
+            from .surfaces import load_height_map
+            if load_height_map(params.height_map).pixel_size is None:
+                warnings.warn(f"map_pixel_size: not given, and the map carries none (a .npy array): its pixel is "
+                              f"the spacing ({params.spacing:g}), so at another spacing it is another body, "
+                              "scaled with it; give map_pixel_size to fix its size", ParameterWarning,
+                              stacklevel=2)
         return params
 
     @classmethod
