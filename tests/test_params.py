@@ -141,7 +141,18 @@ def test_simulate_refuses_arguments_it_would_ignore(tmp_path):
         tfm.simulate(spacing=1 / 16, k_th=0.02, step=2e-3, fields_path=tmp_path / "x.fields.nc")
     with pytest.raises(ParameterError, match="checkpoint_every: applies only with a checkpoint"):
         tfm.simulate(spacing=1 / 16, k_th=0.02, step=2e-3, checkpoint_every=5)
+    # slips that failed late or with a stranger's error (AttributeError: 'dict' object has
+    # no attribute 'units'; TypeError after the first step; FileNotFoundError mid-run)
+    with pytest.raises(ParameterError, match="progress: expected a function of one step record, got 1"):
+        tfm.simulate(spacing=1 / 16, k_th=0.02, step=2e-3, progress=1)
+    with pytest.raises(ParameterError, match="fields_path: the folder of .* does not exist"):
+        tfm.simulate(spacing=1 / 16, k_th=0.02, step=2e-3, snapshots="events",
+                     fields_path=tmp_path / "nowhere" / "x.fields.nc")
+    with pytest.raises(ParameterError, match="simulate: expected a tfm.Params or a dict of parameters, got list"):
+        tfm.simulate([1 / 16])
     assert not list(tmp_path.iterdir())
+    as_dict = dict(spacing="1/16", k_th=0.02, step=2e-3, max_indent=0.05)
+    assert tfm.simulate(as_dict, alpha=0.5).params == Params.from_dict({**as_dict, "alpha": 0.5})
 
 
 # ---- found by a user-style hunt for silently accepted input (2026-11-24) ------------------

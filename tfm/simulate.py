@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
+from pathlib import Path
 
 import numpy as np
 
@@ -63,11 +65,19 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
 
     if p is None:
         p = Params.from_dict(overrides) if overrides else Params()
+    elif isinstance(p, Mapping):
+        p = Params.from_dict({**p, **overrides})
+    elif not isinstance(p, Params):
+        raise ParameterError(f"simulate: expected a tfm.Params or a dict of parameters, got {type(p).__name__}")
     elif overrides:
         p = p.replace(**overrides)
+    if progress is not None and not callable(progress):
+        raise ParameterError(f"progress: expected a function of one step record, got {progress!r}")
     # arguments that would be silently ignored are refused
     if fields_path is not None and p.snapshots == "none":
         raise ParameterError("fields_path: applies only with snapshots = 'events' or K (this run stores none)")
+    if fields_path is not None and not Path(fields_path).expanduser().resolve().parent.is_dir():
+        raise ParameterError(f"fields_path: the folder of {fields_path} does not exist")
     if checkpoint is None:
         for name, value, default in (("checkpoint_every", checkpoint_every, CHECKPOINT_EVERY),
                                      ("keep_checkpoint", keep_checkpoint, False),
