@@ -341,6 +341,17 @@ def _toml_of(spec, folder: Path) -> Path:
 
 
 # ---- same results however the runs are executed ---------------------------------
+@pytest.mark.parametrize("options, message", [
+    (dict(jobs=4), "jobs: 4 applies to a local pool, not to a Dask cluster"),
+    (dict(checkpoint_every=5.0), "checkpoint-every: Dask workers do not checkpoint"),
+])
+def test_options_a_dask_cluster_would_not_use_are_refused(tmp_path, options, message):
+    """-j 4 and --checkpoint-every 5 with --scheduler were silently not used."""
+    with pytest.raises(CampaignError, match=message):
+        run_campaign(SMOKE, scheduler="tcp://127.0.0.1:9", results_dir=tmp_path, **options)
+    assert not any(tmp_path.iterdir())        # refused before the campaign folder is made
+
+
 def test_jobs_2_and_dask_match_jobs_1_bitwise(serial_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     results, _ = serial_run

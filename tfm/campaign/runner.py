@@ -119,6 +119,14 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
     spec = spec_or_path if isinstance(spec_or_path, CampaignSpec) else load_spec(spec_or_path)
     if not isinstance(jobs, int) or jobs < 1:
         raise CampaignError(f"jobs: must be a whole number >= 1, got {jobs!r}")
+    if scheduler is not None:
+        # options of this machine's runs that a Dask cluster would silently not use
+        if jobs != 1:
+            raise CampaignError(f"jobs: {jobs} applies to a local pool, not to a Dask cluster (--scheduler): "
+                                "the cluster's workers set the parallelism")
+        if checkpoint_every not in (CHECKPOINT_EVERY, None):
+            raise CampaignError("checkpoint-every: Dask workers do not checkpoint (they may not share this "
+                                "disk); leave it at its default with --scheduler")
     if checkpoint_every is not None:
         from ..checkpoint import check_every
 
@@ -530,7 +538,11 @@ def _run_dask(todo: list[Run], scheduler,
     except ImportError:
         raise CampaignError("--scheduler needs dask.distributed: pip install 'tfm[dask]'") from None
     own = not hasattr(scheduler, "submit")
-    client = Client(scheduler) if own else scheduler
+    try:
+        client = Client(scheduler, timeout="30s") if own else scheduler
+    except (OSError, TimeoutError) as exc:
+        raise CampaignError(f"scheduler: cannot reach the Dask scheduler at {scheduler} ({exc}); is it "
+                            "running, and is the address right (e.g. tcp://host:8786)?") from None
     try:
         host_threads: dict[str, int] = {}
         for addr, info in client.scheduler_info().get("workers", {}).items():

@@ -577,6 +577,17 @@ def main_limit(args) -> int:
         raise ParameterError(f"jobs: must be a whole number >= 1, got {args.jobs!r}")
     if args.max_ratio is not None and not args.max_ratio > 0:
         raise ParameterError(f"max-ratio: must be > 0, got {args.max_ratio!r}")
+    if args.analyse_only:
+        # options of the computing that --analyse-only would not use: its fit covers every
+        # stored point, which a --where could be taken to have filtered
+        from ..config import CHECKPOINT_EVERY
+        unused = [flag for flag, used in (("--where", args.where), ("--max-ratio", args.max_ratio is not None),
+                                          ("-j", args.jobs != 1),
+                                          ("--checkpoint-every/--no-checkpoints",
+                                           args.checkpoint_every != CHECKPOINT_EVERY)) if used]
+        if unused:
+            raise ParameterError(f"analyse-only: {', '.join(unused)} choose what to compute, and --analyse-only "
+                                 "computes nothing (its fit covers every stored point); drop them")
     t0 = time.perf_counter()
     start_load = machine()["load"][0]
     results_dir = Path(args.results_dir)
