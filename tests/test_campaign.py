@@ -736,6 +736,13 @@ def test_an_unwritable_results_folder_is_refused_before_any_run(tmp_path, capsys
     assert "results-dir: cannot write the campaign folder" in capsys.readouterr().err
 
 
+def test_a_results_folder_in_a_missing_folder_is_refused(tmp_path, capsys):
+    """A mistyped --results-dir made a whole new tree of folders and started the campaign
+    afresh there; a folder inside an existing one is still made."""
+    assert tfm_main(["campaign", "run", str(SMOKE), "--results-dir", str(tmp_path / "typo" / "res"), "-q"]) == 2
+    assert "the folder that would hold" in capsys.readouterr().err and not (tmp_path / "typo").exists()
+
+
 def test_a_capped_auto_preload_is_said_before_a_campaign_runs(tmp_path, capsys):
     spec = spec_from_dict({"name": "capped", "base": {"spacing": "1/64", "k_th": 0.05, "shape": "paraboloid",
                                                       "radius": 0.05, "step": 1e-3}})

@@ -452,8 +452,11 @@ def test_an_interrupted_run_says_what_survives_without_a_traceback(tmp_path, mon
 
     monkeypatch.setattr(sim_module, "simulate", interrupted)
     assert main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "--no-plot"]) == 130
-    assert "interrupted: no table written" in capsys.readouterr().err
+    assert "interrupted: no table written; it was stopped before its first step was saved" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+    # a run that keeps no checkpoint was told "--checkpoint-every SECONDS saves more often"
+    assert main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "--no-plot", "--no-checkpoints"]) == 130
+    assert "this run keeps no checkpoint" in capsys.readouterr().err
 
 
 def test_help_names_every_shape_and_make_help_lists_the_targets():

@@ -271,6 +271,7 @@ def cmd_run(args) -> int:
     notes = check(p)                      # refuses meaningless or oversized runs (exit 2)
     out, plot_path = _plan_outputs(args, p)
     ckpt = _checkpoint_options(args, p, out)
+    args.checkpoint_path = ckpt.get("checkpoint")     # for the message if it is interrupted
     # the figure's worker imports and warms up while this process loads the engine and runs
     worker = start_worker(p) if plot_path is not None else None
     try:
@@ -403,14 +404,16 @@ def main(argv=None) -> int:
             print(f"tfm: interrupted: the table {written} was written, the figure was not "
                   f"(tfm plot {written} draws it)", file=sys.stderr)
             return 130
-        out = Path(args.output) if args.output else None
-        ckpt = checkpoint_path_for(out) if out is not None else None
-        if ckpt is None:
-            kept = "; a checkpoint beside the default table, if one was saved, lets the same command continue"
+        ckpt = getattr(args, "checkpoint_path", False)
+        if ckpt is False:                 # stopped before its outputs were planned
+            kept = ""
+        elif ckpt is None:
+            kept = ("; this run keeps no checkpoint (force control, field snapshots and --no-checkpoints "
+                    "have none): the same command starts it again")
         elif ckpt.exists():
-            kept = f"; its last checkpoint {ckpt} lets the same command continue"
+            kept = f"; its checkpoint {ckpt} lets the same command continue"
         else:
-            kept = "; no checkpoint was saved yet (--checkpoint-every SECONDS saves more often)"
+            kept = "; it was stopped before its first step was saved"
         print(f"tfm: interrupted: no table written{kept}", file=sys.stderr)
         return 130
     finally:

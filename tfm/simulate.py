@@ -67,7 +67,7 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
         p = Params.from_dict(overrides) if overrides else Params()
     elif isinstance(p, Mapping):
         p = Params.from_dict({**p, **overrides})
-    elif not isinstance(p, Params):
+    elif isinstance(p, (str, bytes, int, float, list, tuple)):
         raise ParameterError(f"simulate: expected a tfm.Params or a dict of parameters, got {type(p).__name__}")
     elif overrides:
         p = p.replace(**overrides)

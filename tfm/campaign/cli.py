@@ -82,6 +82,11 @@ def cmd_run(args) -> int:
 
     spec = load_spec(args.file, max_runs=args.max_runs)
     only = {r.run_id for r in select_runs(spec, args.where)} if args.where else None
+    parent = Path(args.results_dir).expanduser().absolute().parent
+    if not parent.exists():
+        # a mistyped path started the campaign afresh in a whole new tree of folders
+        raise CampaignError(f"results-dir: {parent}, the folder that would hold {args.results_dir}, does not "
+                            "exist (a results folder is made inside an existing one)")
     try:
         root = run_campaign(spec, jobs=args.jobs, scheduler=args.scheduler, quiet=args.quiet,
                             results_dir=args.results_dir, retry_failed=not args.skip_failed,
