@@ -121,6 +121,9 @@ BASE = 'name = "bad"\n[base]\nspacing = "1/32"\nk_th = 0.02\nshape = "paraboloid
     (BASE + "[sweep]\nstep = ['1/0']\n", ["step", "cannot read '1/0' as a number"]),
     ("descripton = 'x'\n" + BASE, ["unknown top-level key 'descripton'", "did you mean 'description'"]),
     (BASE + "description = 'x'\n", ["[base]: unknown parameter 'description'", "must come before the first"]),
+    # it said "name: expected a folder-safe name ..., got None"
+    (BASE.replace('name = "bad"\n[base]\n', '[base]\nname = "bad"\n'),
+     ["name: found inside [base]", "must come before the first [table]"]),
     (BASE.replace('"bad"', '"../up"'), ["name", "folder-safe"]),
     ('description = "no name"\n', ["name"]),
     (BASE + "[sweep]\nalpha = 0.5\n", ["[sweep] alpha", "needs a list"]),

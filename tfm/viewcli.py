@@ -42,7 +42,8 @@ def register(sub) -> None:
     anim = sub.add_parser("animate", help="GIF/MP4 of the unloading from stored snapshots",
                           description="Animate the unloading from the stored field snapshots: the "
                                       "contact map beside the force-indentation curve, with a marker "
-                                      "on the curve. Needs a run with snapshots = k (every k-th step).")
+                                      "on the curve. Made for a run with snapshots = k (every k-th "
+                                      "step); one with snapshots = events gives a frame per event.")
     anim.add_argument("run", help="curve .parquet, a folder with one, or a campaign run id")
     anim.add_argument("-o", "--output", help="a .gif (Pillow) or .mp4 (needs ffmpeg); default <stem>.gif")
     anim.add_argument("--fps", type=float, default=8.0, help="frames per second (default 8; at most 100 for a GIF)")
@@ -240,7 +241,9 @@ def _animate(args) -> Path:
     curve, params, fpath = load_run(path)
     fields = _need_fields(path, fpath, params)
     n = animate(fields, curve, params, out, fps=args.fps, unload_only=not args.all_phases)
-    print(f"{n} frames", file=sys.stderr)
+    events = " (the run stored snapshots at its events only; --snapshots K stores every K-th step)" \
+        if params.snapshots == "events" else ""
+    print(f"{n} frames{events}", file=sys.stderr)
     return out
 
 

@@ -127,6 +127,12 @@ def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>", max_runs:
             raise CampaignError(f"{where}: unknown top-level key {key!r}{_hint(key, TOP_LEVEL_KEYS)}; "
                                 f"allowed: {', '.join(TOP_LEVEL_KEYS)}")
     name = data.get("name")
+    if name is None:
+        # TOML puts a key written after [base] into that table: say so, not "got None"
+        inside = [section for section, table in data.items() if isinstance(table, Mapping) and "name" in table]
+        if inside:
+            raise CampaignError(f"{where}: name: found inside [{inside[0]}]; the top-level keys (name, "
+                                "description, ...) must come before the first [table] of the file")
     if not isinstance(name, str) or not NAME_PATTERN.match(name):
         raise CampaignError(f"{where}: name: expected a folder-safe name (letters, digits, '.', '_', '-'; "
                             f"starting with a letter or digit), got {name!r}")
