@@ -260,6 +260,14 @@ def test_unreadable_npy_maps_are_refused(tmp_path, cut):
         Params(shape="height_map", height_map=str(broken), f_th=0, max_indent=1e-3, step=1e-4)
 
 
+def test_a_text_file_named_npy_is_not_called_pickled_data(tmp_path):
+    text = tmp_path / "heights.npy"
+    text.write_text("0.0 0.1\n0.2 0.3\n")
+    with pytest.raises(ParameterError, match="as a .npy array: it has no NumPy header") as info:
+        Params(shape="height_map", height_map=str(text), f_th=0, max_indent=1e-3, step=1e-4)
+    assert "pickled" not in str(info.value)
+
+
 def test_missing_map_and_map_without_shape(tmp_path):
     with pytest.raises(ParameterError, match="height_map: no such file"):
         Params(shape="height_map", height_map=str(tmp_path / "nope.npy"), f_th=0, max_indent=1e-3, step=1e-4)

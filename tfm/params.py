@@ -835,9 +835,6 @@ def _validate_units(p: Params) -> None:
     mixed = " with units='si' every length is in metres (paper-unit values mixed in?)"
     if p.shape != "height_map" and p.spacing >= p.radius:
         raise ParameterError(f"spacing: must be < radius ({p.radius:g} m), got {p.spacing!r};{mixed}")
-    try:
-        dmax = p.delta_max
-    except ParameterError as exc:
-        raise ParameterError(f"{exc};{mixed}") from None
+    dmax = p.delta_max           # its own errors name their parameter (not always a length)
     if p.step > dmax:
         raise ParameterError(f"step: must be <= max_indent ({dmax:g} m), got {p.step!r};{mixed}")

@@ -275,6 +275,11 @@ def load_height_map(path: str) -> HeightMap:
         return _MAP_CACHE[key]
     pixel = unit = None
     if file.suffix.lower() == ".npy":
+        with open(file, "rb") as fh:
+            if fh.read(6) != b"\x93NUMPY":
+                # NumPy calls any file without its header "pickled data"
+                raise MapError(f"height_map: cannot read {str(path)!r} as a .npy array: it has no NumPy "
+                               "header (save the heights with numpy.save)")
         try:
             heights = np.load(file, allow_pickle=False)
         except (ValueError, OSError, EOFError) as exc:      # EOFError: an empty file
