@@ -145,6 +145,17 @@ def test_the_loading_branch_is_displacement_controls(spacing):
     assert np.abs(fl["indent"].to_numpy() - expected).max() <= p.step
 
 
+def test_a_load_step_that_runs_out_of_tries_is_flagged():
+    """max_rounds also caps the tries of a load step (tfm.protocol._load_to); a run whose
+    steps run out of them is flagged, not reported as converged."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = tfm.simulate(Params(spacing=1 / 32, control="force", max_rounds=1, f_th=None, **STANDARD))
+    assert res.summary["rounds_exceeded"] and "max_rounds=1" in res.summary["warnings"]
+
+
 def test_the_step_guard_applies_under_force_control():
     """``step`` is the largest move of the flat while loading under force control too, so
     a coarse one sets the answer as it does under displacement control (1/32, step 0.02:

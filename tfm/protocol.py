@@ -255,7 +255,10 @@ def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
             entered += rec.n_entered
             break
     else:
-        out.rounds_exceeded += 1
+        out.rounds_exceeded += 1          # flagged; the state is the last one taken
+        if rec is None:                   # every try went beyond: the shallowest of them
+            d, trial, rec = over
+            state.__dict__.update(vars(trial))
     rec.rounds, rec.solver_iters, rec.n_snapped, rec.n_entered = rounds, iters, snapped, entered
     return rec, d, rec.n_contact > 0
 
