@@ -144,6 +144,10 @@ def test_captions_and_references_of_height_maps_rough_bodies_and_disorder(tmp_pa
     assert "weibull $F_{th}$ disorder 0.3 (seed 2)" in text
     assert plots.reference_label(rough) == "Hertz (smooth)"
     assert plots.reference_label(tfm.Params.from_dict(dict(STANDARD, spacing=1 / 32))) == "Hertz"
+    # the rough punch's line did not say it was the smooth punch's
+    punch = tfm.Params.from_dict(dict(shape="flat_punch", radius=0.5, spacing=1 / 32, f_th=0, rms_slope=0.1,
+                                      max_indent=0.012, step=1e-4))
+    assert plots.reference_label(punch) == "Boussinesq flat punch (smooth), $P = 2E^*R\\delta$"
 
 
 def test_jkr_scaling_axis_has_no_overlapping_ticks():

@@ -206,7 +206,7 @@ def reference_label(p) -> str | None:
         return f"Hertz{' (smooth)' if smooth else ''}"
     if p.shape == "sphere":
         return f"Hertz (paraboloid approximation of the sphere{smooth})"
-    return "Boussinesq flat punch, $P = 2E^*R\\delta$"
+    return f"Boussinesq flat punch{' (smooth)' if smooth else ''}, $P = 2E^*R\\delta$"
 
 
 def _save(fig, path):
@@ -308,7 +308,10 @@ def _curve_axes(ax1, ax2, p=None):
     ax1.set_xlabel(indent_label(p))
     ax1.set_ylabel(force_label(p))
     ax2.set_xlabel(force_label(p))
-    ax2.set_ylabel(axis_label("contact radius $a$", "length", p))
+    # a rough contact is patches: its radius is that of a disc of the same area
+    rough = p is not None and (p.rms_height > 0 or p.rms_slope > 0 or p.shape == "height_map")
+    ax2.set_ylabel(axis_label("contact radius $a = \\sqrt{A/\\pi}$" if rough else "contact radius $a$",
+                              "length", p))
     for ax in (ax1, ax2):
         ax.axhline(0, color="0.7", lw=0.5)
     # one legend: (b) draws the same lines, and a second box found no free corner in a(P)
@@ -378,6 +381,13 @@ class ContactMap:
             self.grey.set_alpha(released)
         self._line(snap)
         ax.set_aspect("equal")
+        # the grey and the black line are not on the colour bar: say what they are
+        from matplotlib.lines import Line2D
+        from matplotlib.patches import Patch
+
+        ax.legend(handles=[Patch(facecolor="0.75", label="released (snapped)"),
+                           Line2D([], [], color="k", lw=0.8, label="contact line")],
+                  loc="upper left", fontsize="x-small", framealpha=0.85, handlelength=1.2)
         ax.set_xlabel(axis_label("$x$", "length", params))
         ax.set_ylabel(axis_label("$y$", "length", params))
         if colorbar:
