@@ -739,6 +739,19 @@ def test_an_unwritable_results_folder_is_refused_before_any_run(tmp_path, capsys
     assert "results-dir: cannot write the campaign folder" in capsys.readouterr().err
 
 
+def test_a_campaigns_parameter_warnings_name_the_run(tmp_path):
+    """They printed as Python warnings ("spec.py:220: ParameterWarning: ... params =
+    Params.from_dict(values, where=label)") without saying which run."""
+    path = tmp_path / "zw.toml"
+    path.write_text('name = "zw"\n[base]\nspacing = "1/32"\nshape = "paraboloid"\nmax_indent = 0.05\n'
+                    'step = 1e-3\nalpha = 0.5\n[sweep]\nk_th = [0.0, 0.02]\n')
+    proc = subprocess.run([sys.executable, "-m", "tfm", "campaign", "expand", str(path)], cwd=REPO,
+                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert proc.returncode == 0
+    assert proc.stderr == (f"tfm: warning: {path}: run 0 (k_th=0.0): alpha: given but has no effect here: "
+                           "every threshold is zero (no adhesion)\n")
+
+
 def test_a_results_folder_in_a_missing_folder_is_refused(tmp_path, capsys):
     """A mistyped --results-dir made a whole new tree of folders and started the campaign
     afresh there; a folder inside an existing one is still made."""

@@ -11,6 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+import tfm.checkpoint
 from tfm import Params
 from tfm.cli import main
 from tfm.results import read_metadata
@@ -218,7 +219,14 @@ def test_a_failed_write_leaves_no_temporary_file(tmp_path, monkeypatch):
     monkeypatch.setattr(pq, "write_table", broken)
     with pytest.raises(OSError, match="No space"):
         main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "--no-plot"])
-    assert list(tmp_path.iterdir()) == []
+    # no half table; the finished run stays in its checkpoint (a stop or a failure while
+    # the table was written lost the whole run: simulate had removed it), so the same
+    # command writes the table without computing again
+    assert [p.name for p in tmp_path.iterdir()] == ["c.checkpoint.npz"]
+    assert tfm.checkpoint.read_meta(tmp_path / "c.checkpoint.npz")["phase"] == "done"
+    monkeypatch.undo()
+    assert main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "--no-plot", "-q"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.parquet"]
 
 
 def test_a_failed_write_leaves_no_figure_of_the_worker(tmp_path, monkeypatch):
@@ -252,7 +260,7 @@ def test_a_failed_write_leaves_no_figure_of_the_worker(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="No space"):
         main(["run", *SMALL, "-o", str(tmp_path / "c.parquet")])
     assert sent and drawn == [True] and started[0].proc.returncode is not None
-    assert list(tmp_path.iterdir()) == []
+    assert [p.name for p in tmp_path.iterdir()] == ["c.checkpoint.npz"]     # the run, kept
 
 
 def test_tfm_run_as_its_own_process_writes_the_table_and_the_figure(tmp_path):

@@ -156,6 +156,30 @@ def test_a_load_step_that_runs_out_of_tries_is_flagged():
     assert res.summary["rounds_exceeded"] and "max_rounds=1" in res.summary["warnings"]
 
 
+def test_a_fine_step_under_a_coarse_load_step_reaches_the_load():
+    """One load step of 0.0047 with step 2e-6 needs 25,000 moves of one step: max_rounds
+    capped them, loading stopped at a quarter of max_load, and the jump-off was 20 % low,
+    flagged as 'snap/enter rounds hit max_rounds'. The moves are capped by the depth now."""
+    import warnings
+
+    p = Params(spacing=1 / 32, control="force", max_load=0.004745, load_step=0.004745, step=2e-6,
+               f_th=None, **{**STANDARD, "max_indent": "auto"})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")          # the preload note of an explicit max_load
+        s = tfm.simulate(p).summary
+    assert s["max_force"] == pytest.approx(0.004745, rel=1e-8) and not s["rounds_exceeded"]
+    # the jump-off of the default load steps (measured 0.0038354 at 1/32)
+    assert s["jump_off_force"] == pytest.approx(0.0038354, rel=0.01)
+
+
+def test_a_contact_that_closes_without_tension_has_no_jump_off():
+    """Without adhesion the contact closes at P = 0: jump_off_force was -0.0 and its radius
+    that of one spring touching at no load."""
+    s = tfm.simulate(Params(spacing=1 / 32, control="force", f_th=0.0, k_th=None, alpha=0.0,
+                            **{k: v for k, v in STANDARD.items() if k not in ("alpha", "k_th")})).summary
+    assert np.isnan(s["jump_off_force"]) and np.isnan(s["jump_off_contact_radius"])
+
+
 def test_the_step_guard_applies_under_force_control():
     """``step`` is the largest move of the flat while loading under force control too, so
     a coarse one sets the answer as it does under displacement control (1/32, step 0.02:

@@ -190,7 +190,7 @@ def test_tfm_limit_refuses_bad_options(capsys):
     capsys.readouterr()
     # they choose what to compute; --analyse-only fitted every stored point regardless
     assert main(["limit", "--analyse-only", "--where", "self_term=3.8", "--max-ratio", "20"]) == 2
-    assert "analyse-only: --where, --max-ratio choose what to compute" in capsys.readouterr().err
+    assert "analyse-only: --where, --max-ratio: options of computing runs" in capsys.readouterr().err
 
 
 def test_limit_where_and_max_ratio_select_runs_in_both_campaigns():

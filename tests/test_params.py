@@ -150,6 +150,9 @@ def test_simulate_refuses_arguments_it_would_ignore(tmp_path):
                      fields_path=tmp_path / "nowhere" / "x.fields.nc")
     with pytest.raises(ParameterError, match="simulate: expected a tfm.Params or a dict of parameters, got list"):
         tfm.simulate([1 / 16])
+    # a checkpoint folder that cannot take the file failed at the first save, 10 min in
+    with pytest.raises(ParameterError, match="checkpoint: cannot write the folder /proc"):
+        tfm.simulate(spacing=1 / 16, k_th=0.02, step=2e-3, checkpoint="/proc/run.npz")
     assert not list(tmp_path.iterdir())
     as_dict = dict(spacing="1/16", k_th=0.02, step=2e-3, max_indent=0.05)
     assert tfm.simulate(as_dict, alpha=0.5).params == Params.from_dict({**as_dict, "alpha": 0.5})
@@ -193,6 +196,10 @@ def test_integers_given_as_text_are_read_exactly():
     same seed written as a number)."""
     kw = dict(spacing="1/32", k_th=0.02, threshold_disorder="uniform", disorder_width=0.2)
     assert Params.from_dict({**kw, "disorder_seed": "9007199254740993"}).disorder_seed == 2 ** 53 + 1
+    for text in ("9007199254740993.0", "9.007199254740993e15"):
+        assert Params.from_dict({**kw, "disorder_seed": text}).disorder_seed == 2 ** 53 + 1
+    with pytest.raises(ParameterError, match="disorder_seed: expected a whole number, got '1.5'"):
+        Params.from_dict({**kw, "disorder_seed": "1.5"})
     assert (Params.from_dict({**kw, "disorder_seed": "12"}).run_id
             == Params.from_dict({**kw, "disorder_seed": 12}).run_id)
 

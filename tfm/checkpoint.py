@@ -149,6 +149,7 @@ class Checkpoint:
         self._last = time.monotonic()
         self.resumed_at = None     # the step a loaded checkpoint continues from
         self.set_aside = None      # why a checkpoint found here was not used
+        self.save_when_done = False  # also save the finished curve (phase DONE)
 
     # ---- reading -------------------------------------------------------------
     def saved_run_id(self) -> str | None:
@@ -165,6 +166,9 @@ class Checkpoint:
 
         if not self.path.exists():
             return None
+        with open(self.path, "rb") as fh:
+            if fh.read(2) != b"PK":        # NumPy calls any other file "pickled data"
+                return self._refuse("cannot be read (not an .npz archive)")
         try:
             with np.load(self.path, allow_pickle=False) as z:
                 arrays = {key: z[key] for key in z.files}
@@ -213,9 +217,12 @@ class Checkpoint:
         arrays["meta"] = np.array(json.dumps(meta))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
-        os.replace(tmp, self.path)
+        try:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+            os.replace(tmp, self.path)
+        finally:
+            tmp.unlink(missing_ok=True)    # a save stopped by a second Ctrl-C left it
         self._last = time.monotonic()
 
     def remove(self) -> None:

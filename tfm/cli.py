@@ -6,6 +6,7 @@ import dataclasses
 import json
 import os
 import sys
+import warnings
 from pathlib import Path
 
 from . import __version__
@@ -181,7 +182,10 @@ def _checkpoint_options(args, p: Params, out: Path) -> dict:
             raise ParameterError(f"checkpoint-every: {reason}")
     path = checkpoint_path_for(out)
     _check_foreign_checkpoint(path, p, args.overwrite)
-    return {"checkpoint": path, "checkpoint_every": every, "replace_checkpoint": args.overwrite}
+    # kept until the table is written (_run_and_write): a stop while it is written would
+    # otherwise find neither table nor checkpoint
+    return {"checkpoint": path, "checkpoint_every": every, "replace_checkpoint": args.overwrite,
+            "keep_checkpoint": True}
 
 
 def _check_foreign_checkpoint(path: Path, p: Params, overwrite: bool) -> None:
@@ -248,6 +252,8 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
         worker.send(res, plot)
     res.write_curve(out)
     args.written = out                    # for the message of an interruption from here on
+    if ckpt:
+        Path(ckpt["checkpoint"]).unlink(missing_ok=True)     # the table holds the run now
     return res, out, plot
 
 
@@ -346,6 +352,17 @@ def exit_now(code: int) -> None:
     os._exit(code)
 
 
+_PYTHON_FORMAT = warnings.formatwarning
+
+
+def _format_warning(message, category, filename, lineno, line=None):
+    """tfm's own warnings as a line a user reads ("spec.py:220: ParameterWarning: ...
+    params = Params.from_dict(values, where=label)" was printed for a campaign's)."""
+    if category.__module__.split(".")[0] == "tfm":
+        return f"tfm: warning: {message}\n"
+    return _PYTHON_FORMAT(message, category, filename, lineno, line)
+
+
 def attach_negative_values(argv: list[str]) -> list[str]:
     """``--flag -1/64`` as ``--flag=-1/64``: argparse takes a word that starts with '-' for
     an option unless it looks like a plain negative number, so a negative fraction or
@@ -376,6 +393,8 @@ def main(argv=None) -> int:
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     parser = build_parser()
     args = parser.parse_args(attach_negative_values(sys.argv[1:] if argv is None else argv))
+    if argv is None:
+        warnings.formatwarning = _format_warning
     if argv is None and args.func is cmd_run:
         # One curve in a process of its own. Importing Numba, pandas and pyarrow makes
         # millions of objects, and the cyclic collector's passes over them took 0.25 s of a

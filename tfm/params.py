@@ -17,6 +17,7 @@ overrides the meaningful-run guards of ``tfm.guards`` and does not change any nu
 from __future__ import annotations
 
 import dataclasses
+import decimal
 import difflib
 import functools
 import hashlib
@@ -258,15 +259,16 @@ class Params:
         for name in given:
             rule = APPLIES.get(name)
             if rule is not None and not rule.applies(params) and not rule.also(params):
-                warnings.warn(f"{name}: given but has no effect; it applies only when {rule.when}",
+                warnings.warn(f"{prefix}{name}: given but has no effect; it applies only when {rule.when}",
                               ParameterWarning, stacklevel=2)
         for name, why in _moot(params):
             if name in given and given[name] != _DEFAULTS[name]:
-                warnings.warn(f"{name}: given but has no effect here: {why}", ParameterWarning, stacklevel=2)
+                warnings.warn(f"{prefix}{name}: given but has no effect here: {why}", ParameterWarning,
+                              stacklevel=2)
         if "height_map" in given and "map_pixel_size" not in given and params.shape == "height_map":
             from .surfaces import load_height_map
             if load_height_map(params.height_map).pixel_size is None:
-                warnings.warn(f"map_pixel_size: not given, and the map carries none (a .npy array): its pixel is "
+                warnings.warn(f"{prefix}map_pixel_size: not given, and the map carries none (a .npy array): its pixel is "
                               f"the spacing ({params.spacing:g}), so at another spacing it is another body, "
                               "scaled with it; give map_pixel_size to fix its size", ParameterWarning,
                               stacklevel=2)
@@ -487,8 +489,12 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
         if kind == "int":
             if isinstance(value, numbers.Integral) and not isinstance(value, bool):
                 return int(value)
-            if isinstance(value, str) and re.fullmatch(r"[+-]?\d+", value.strip()):
-                return int(value.strip())   # exact: through a float, 2**53 + 1 became 2**53
+            if isinstance(value, str) and re.fullmatch(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", value.strip()):
+                # exact: through a float, 2**53 + 1 became 2**53 (also as "9.007199254740993e15")
+                exact = decimal.Decimal(value.strip())
+                if exact != exact.to_integral_value():
+                    raise ParameterError(f"{key}: expected a whole number, got {value!r}")
+                return int(exact)
             number = parse_number(value, key)
             if not number.is_integer():
                 raise ParameterError(f"{key}: expected a whole number, got {value!r}")
@@ -582,9 +588,10 @@ def _validate(p: Params) -> None:
     _positive("step", p.step)
     _choice("snap_rule", p.snap_rule, SNAP_RULES)
     if not MIN_TOL <= _finite("tol", p.tol) <= 1e-2:
-        raise ParameterError(f"tol: must be in [{MIN_TOL:g}, 1e-2], got {p.tol!r} (below {MIN_TOL:g} the residual "
-                             "is under the rounding of the forces themselves: CG's recursive residual falls on "
-                             "and reports what no solution has, and at 1e-200 it underflowed to a division by zero)")
+        why = (f" (below {MIN_TOL:g} the residual is under the rounding of the forces themselves: CG's "
+               "recursive residual falls on and reports what no solution has, and at 1e-200 it underflowed "
+               "to a division by zero)" if p.tol < MIN_TOL else "")
+        raise ParameterError(f"tol: must be in [{MIN_TOL:g}, 1e-2], got {p.tol!r}{why}")
     _integer("max_iter", p.max_iter, 1, MAX_CAP)
     _integer("max_rounds", p.max_rounds, 1, MAX_CAP)
     if p.max_unload_steps is not None:
@@ -719,7 +726,8 @@ def _validate_surface(p: Params) -> None:
     by_load = p.control == "force" and p.max_load is not None
     if rough and p.max_indent == "auto" and not by_load:
         raise ParameterError("max_indent: 'auto' assumes a smooth body; give a number for a rough surface "
-                             "(e.g. the smooth auto value plus 3 rms heights)")
+                             "(e.g. the smooth auto value plus 3 rms heights)"
+                             + (", or under force control a max_load" if p.control == "force" else ""))
     if (p.max_indent == "auto" and not by_load and p.shape in ("sphere", "paraboloid")
             and p.threshold_force == 0.0):
         raise ParameterError("max_indent: 'auto' sizes the preload by the adhesion (the JKR contact radius); "

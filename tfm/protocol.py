@@ -25,6 +25,7 @@ snapshots). Files are written only through ``observe`` and a checkpoint passed i
 from __future__ import annotations
 
 import copy
+import math
 import sys
 import time
 from typing import Callable
@@ -32,6 +33,7 @@ from typing import Callable
 import numpy as np
 
 from .checkpoint import DONE, StopRequest
+from .params import MAX_STEPS
 from .solver import ContactState, CurveResult, Problem, StepRecord
 
 # Bisections of the last load step before the jump-off: resolution load_step / 2**10.
@@ -52,7 +54,8 @@ def run(p, prob: Problem, observe: Observer | None = None, checkpoint=None) -> C
     if p.control == "force":
         if checkpoint is not None:
             raise ValueError("checkpoint: force control is not checkpointed")
-        return force_control(prob, p.peak_load, p.load_decrement, p.step, max_unload, observe)
+        return force_control(prob, p.peak_load, p.load_decrement, p.step, max_unload, observe,
+                             depth=p.delta_max)
     return displacement_control(prob, p.delta_max, p.step, max_unload, observe, checkpoint)
 
 
@@ -104,6 +107,8 @@ def displacement_control(prob: Problem, delta_max: float, step: float, max_unloa
                                   observe, done, t0, before)
         if stop.pending:                 # it came during the last step: keep the whole curve
             done(DONE, 0)
+        elif checkpoint.save_when_done:  # the caller stores the result, then removes it
+            checkpoint.save(state, out, DONE, 0, out.wall_time)
     return out
 
 
@@ -131,18 +136,20 @@ def _displacement_steps(state, out, first, n_load, delta_max, step, max_unload_s
 
 
 def force_control(prob: Problem, peak_load: float, load_step: float, step: float,
-                  max_unload_steps: int, observe: Observer | None = None) -> CurveResult:
+                  max_unload_steps: int, observe: Observer | None = None, depth: float = math.inf) -> CurveResult:
     """Raise P to ``peak_load`` in steps of ``load_step``, lower it in the same steps until
     the contact breaks; refine the last load held by bisection. While loading, the flat
     moves by at most ``step`` at a time (_load_to); ``step`` is also how far it moves to
-    make the first contact when unloading has none left."""
+    make the first contact when unloading has none left. ``depth`` is the non-adhesive
+    depth of the peak load: no load step moves the flat more than twice that in steps."""
     out = CurveResult()
     t0 = time.perf_counter()
     state = ContactState(prob)
     d, k = 0.0, 0
     n_load = int(np.ceil(peak_load / load_step - 1e-9))
+    max_moves = min(MAX_STEPS, math.ceil(2.0 * depth / step) + 10) if math.isfinite(depth) else MAX_STEPS
     for j in range(1, n_load + 1):
-        rec, d, _ = _hold(state, min(j * load_step, peak_load), d, step, k, "load", out)
+        rec, d, _ = _hold(state, min(j * load_step, peak_load), d, step, k, "load", out, max_moves)
         _record(out, state, rec, observe)
         k += 1
     out.unload_complete = False
@@ -182,12 +189,12 @@ def force_control(prob: Problem, peak_load: float, load_step: float, step: float
 
 
 def _hold(state: ContactState, target: float, d: float, step: float, k: int, phase: str,
-          out: CurveResult) -> tuple[StepRecord, float, bool]:
+          out: CurveResult, max_moves: int = MAX_STEPS) -> tuple[StepRecord, float, bool]:
     """Move the flat until the contact carries the compressive load ``target`` on a set
     that no longer changes. Returns the step's record (counts summed over the Newton
     steps), the final d, and False if the contact broke (no spring left in contact)."""
     if phase == "load":
-        return _load_to(state, target, d, step, k, out)
+        return _load_to(state, target, d, step, k, out, max_moves)
     return _newton_hold(state, target, d, step, k, phase, out)
 
 
@@ -196,7 +203,7 @@ def _load(state: ContactState) -> float:
 
 
 def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
-             out: CurveResult) -> tuple[StepRecord, float, bool]:
+             out: CurveResult, max_moves: int = MAX_STEPS) -> tuple[StepRecord, float, bool]:
     """A loading step: the flat moves in until the contact carries ``target``, never past
     it, and by at most ``step`` at a time. On a fixed set the load is linear in d; springs
     that enter as the flat moves in only stiffen the contact, so the Newton step on the
@@ -215,7 +222,11 @@ def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
     rounds = iters = snapped = entered = 0
     over = None                           # (d, state, record) of the shallowest try beyond the target
     rec = None
-    for _ in range(state.prob.max_rounds):
+    # max_rounds caps the Newton and bisection tries; whole steps in below the target are
+    # the way down (a fine step under a coarse load step takes thousands: the loading
+    # stopped at a quarter of max_load), capped by max_moves
+    tries = moves = 0
+    while tries < state.prob.max_rounds and moves < max_moves:
         if state.contact.any():
             before = out.solver_iters
             slope = float(state.unit_response(out).sum())  # d(sum F)/dd > 0 on the set
@@ -239,8 +250,13 @@ def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
             state.__dict__.update(vars(trial))           # a move that stays below the target
             snapped += trec.n_snapped
             entered += trec.n_entered
+            if d_try == d - step:
+                moves += 1
+            else:
+                tries += 1
             d, rec = d_try, trec
         else:
+            tries += 1
             over = (d_try, trial, trec)
         if over is not None and abs(over[0] - d) <= JUMP_MOVE * max(step, abs(d)):
             # the load jumps across the target here: take the state beyond, back off on its set

@@ -208,6 +208,8 @@ def summarize(curve, out, p: Params, n_springs: int, grid_side: int | None) -> d
     held = np.flatnonzero(unload & (col["n_contact"] > 0))
     jump = p.control == "force" and out.unload_complete and held.size > 0
     j = held[-1] if jump else 0
+    # a contact that closes without tension (no adhesion) has no jump-off, as no pull-off
+    jump = jump and -col["force"][j] > 0.0
     return {
         "jump_off_force": float(-col["force"][j]) if jump else math.nan,
         "jump_off_contact_radius": float(col["contact_radius"][j]) if jump else math.nan,

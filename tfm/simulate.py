@@ -1,6 +1,7 @@
 """One run: a parameter record in, a curve and a summary out."""
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
@@ -85,6 +86,10 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
             if value != default:
                 raise ParameterError(f"{name}: applies only with a checkpoint path (checkpoint=...)")
     ckpt = _checkpoint(p, checkpoint, checkpoint_every, replace_checkpoint) if checkpoint is not None else None
+    if ckpt is not None:
+        # a caller that removes the checkpoint itself, once the result is stored, gets the
+        # finished curve saved too: a stop before the store then loses nothing
+        ckpt.save_when_done = keep_checkpoint
     notes = check(p)                   # refuses a meaningless or oversized run up front
     for note in notes:
         warnings.warn(f"run {p.run_id}: {note}", RunWarning, stacklevel=2)
@@ -149,7 +154,11 @@ def _checkpoint(p: Params, path, every: float, replace: bool) -> Checkpoint:
                                  "another path, or replace_checkpoint=True to replace it")
     try:
         ckpt.path.parent.mkdir(parents=True, exist_ok=True)
+        # a folder that cannot take the file failed at the first save, ten minutes in
+        probe = ckpt.path.with_name(f".{ckpt.path.name}.{os.getpid()}.probe.tmp")
+        probe.write_bytes(b"")
+        probe.unlink()
     except OSError as exc:
         raise ParameterError(f"checkpoint: cannot write the folder {ckpt.path.parent}: "
-                         f"{exc.strerror or exc}") from None
+                             f"{exc.strerror or exc}") from None
     return ckpt

@@ -216,7 +216,8 @@ def _expand(base, sweep, zips, where):
                 # a swept or zipped list gives every run a value: the default value there
                 # says "not used in this run", so only [base] keys warn
                 for key in swept:
-                    warnings.filterwarnings("ignore", message=f"{key}: given but", category=ParameterWarning)
+                    warnings.filterwarnings("ignore", message=f".*: {re.escape(key)}: given but",
+                                            category=ParameterWarning)
                 params = Params.from_dict(values, where=label)
             notes = tuple(check(params, memory=False))
             _check_kernel(params, kernels_checked)

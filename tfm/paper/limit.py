@@ -586,8 +586,8 @@ def main_limit(args) -> int:
                                           ("--checkpoint-every/--no-checkpoints",
                                            args.checkpoint_every != CHECKPOINT_EVERY)) if used]
         if unused:
-            raise ParameterError(f"analyse-only: {', '.join(unused)} choose what to compute, and --analyse-only "
-                                 "computes nothing (its fit covers every stored point); drop them")
+            raise ParameterError(f"analyse-only: {', '.join(unused)}: options of computing runs, and "
+                                 "--analyse-only computes none (its fit covers every stored point); drop them")
     t0 = time.perf_counter()
     start_load = machine()["load"][0]
     results_dir = Path(args.results_dir)
