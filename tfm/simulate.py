@@ -6,8 +6,6 @@ import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
-import numpy as np
-
 from .checkpoint import CHECKPOINT_EVERY, Checkpoint, why_not
 from .geometry import heights, make_layout
 from .guards import check
