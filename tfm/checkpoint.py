@@ -160,6 +160,16 @@ class Checkpoint:
         except (OSError, ValueError, KeyError, AttributeError):
             return None
 
+    def foreign(self) -> str | None:
+        """What the file here holds if it is not this run's saved state (another run's, or
+        no checkpoint at all), None if there is no file or it is this run's."""
+        if not self.path.exists():
+            return None
+        owner = self.saved_run_id()
+        if owner == self.run_id:
+            return None
+        return f"the saved state of another run ({owner})" if owner else "a file that is not a readable checkpoint"
+
     def load(self) -> Resume | None:
         """The saved run, or None (no file, another run or engine, unreadable: warned)."""
         from .solver import CurveResult, StepRecord

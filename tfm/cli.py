@@ -192,14 +192,13 @@ def _check_foreign_checkpoint(path: Path, p: Params, overwrite: bool) -> None:
     """The saved state of another run (a killed run with other parameters and the same
     -o), or a file that is no checkpoint, is not discarded without --overwrite: it was set
     aside and lost, without a word."""
-    if not path.exists() or overwrite:
+    if overwrite:
         return
     from .checkpoint import Checkpoint
 
-    owner = Checkpoint(path, p.run_id).saved_run_id()
-    if owner == p.run_id:
-        return                            # this run's: the run continues from it
-    what = f"the saved state of another run ({owner})" if owner else "a file that is not a readable checkpoint"
+    what = Checkpoint(path, p.run_id).foreign()
+    if what is None:
+        return                            # none, or this run's: the run continues from it
     raise OutputError(f"checkpoint: {path} holds {what}; rerun that run's command to continue it, or pass "
                       "--overwrite to discard it")
 

@@ -202,6 +202,19 @@ def _load(state: ContactState) -> float:
     return -float(state.F.sum())
 
 
+def _newton(state: ContactState, target: float, d: float, out: CurveResult) -> tuple[float, int]:
+    """The d at which the current contact set carries ``target`` (exact while the set
+    holds: F is linear in d on it), and the CG iterations of the unit response it took."""
+    before = out.solver_iters
+    slope = float(state.unit_response(out).sum())  # d(sum F)/dd > 0 on the set
+    return d + (_load(state) - target) / slope, out.solver_iters - before
+
+
+def _adopt(state: ContactState, trial: ContactState) -> None:
+    """Make ``state`` the tried copy (_copy_state) that was taken."""
+    state.__dict__.update(vars(trial))
+
+
 def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
              out: CurveResult, max_moves: int = MAX_STEPS) -> tuple[StepRecord, float, bool]:
     """A loading step: the flat moves in until the contact carries ``target``, never past
@@ -228,10 +241,8 @@ def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
     tries = moves = 0
     while tries < state.prob.max_rounds and moves < max_moves:
         if state.contact.any():
-            before = out.solver_iters
-            slope = float(state.unit_response(out).sum())  # d(sum F)/dd > 0 on the set
-            iters += out.solver_iters - before
-            newton = d + (_load(state) - target) / slope
+            newton, used = _newton(state, target, d, out)
+            iters += used
         else:
             newton = -np.inf              # no contact yet: one step in
         d_try = max(newton, d - step)     # at most one step in
@@ -243,11 +254,11 @@ def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
         rounds += trec.rounds
         iters += trec.solver_iters
         if exact_try and trec.n_snapped == 0 and trec.n_entered == 0:
-            state.__dict__.update(vars(trial))           # the Newton step held its set: exact
+            _adopt(state, trial)           # the Newton step held its set: exact
             d, rec = d_try, trec
             break
         if _load(trial) <= target:
-            state.__dict__.update(vars(trial))           # a move that stays below the target
+            _adopt(state, trial)           # a move that stays below the target
             snapped += trec.n_snapped
             entered += trec.n_entered
             if d_try == d - step:
@@ -261,7 +272,7 @@ def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
         if over is not None and abs(over[0] - d) <= JUMP_MOVE * max(step, abs(d)):
             # the load jumps across the target here: take the state beyond, back off on its set
             d, trial, trec = over
-            state.__dict__.update(vars(trial))
+            _adopt(state, trial)
             snapped += trec.n_snapped
             entered += trec.n_entered
             rec, d, _ = _newton_hold(state, target, d, step, k, "load", out)
@@ -274,7 +285,7 @@ def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
         out.rounds_exceeded += 1          # flagged; the state is the last one taken
         if rec is None:                   # every try went beyond: the shallowest of them
             d, trial, rec = over
-            state.__dict__.update(vars(trial))
+            _adopt(state, trial)
     rec.rounds, rec.solver_iters, rec.n_snapped, rec.n_entered = rounds, iters, snapped, entered
     return rec, d, rec.n_contact > 0
 
@@ -294,10 +305,8 @@ def _newton_hold(state: ContactState, target: float, d: float, step: float, k: i
                 break
             d_new = d - step          # bring the flat down to the first contact
         else:
-            before = out.solver_iters
-            slope = float(state.unit_response(out).sum())  # d(sum F)/dd > 0 on the set
-            iters += out.solver_iters - before
-            d_new = d + (-float(state.F.sum()) - target) / slope
+            d_new, used = _newton(state, target, d, out)
+            iters += used
         rec = state.advance(d_new, k, phase, out)
         d = d_new
         rounds += rec.rounds

@@ -144,12 +144,10 @@ def _checkpoint(p: Params, path, every: float, replace: bool) -> Checkpoint:
     if reason:
         raise ParameterError(f"checkpoint: {reason}")
     ckpt = Checkpoint(path, p.run_id, every)
-    if not replace and ckpt.path.exists():
-        owner = ckpt.saved_run_id()
-        if owner != p.run_id:
-            what = f"the saved state of another run ({owner})" if owner else "a file that is not a readable checkpoint"
-            raise ParameterError(f"checkpoint: {ckpt.path} holds {what}; it is left alone: delete it, give "
-                                 "another path, or replace_checkpoint=True to replace it")
+    what = None if replace else ckpt.foreign()
+    if what is not None:
+        raise ParameterError(f"checkpoint: {ckpt.path} holds {what}; it is left alone: delete it, give "
+                             "another path, or replace_checkpoint=True to replace it")
     try:
         ckpt.path.parent.mkdir(parents=True, exist_ok=True)
         # a folder that cannot take the file failed at the first save, ten minutes in
