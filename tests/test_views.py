@@ -332,6 +332,8 @@ def test_views_refuse_a_campaigns_joined_curves_and_its_summary(tmp_path, capsys
     (["animate", "{run}", "-o", "{tmp}/x.mp4", "--fps", "nan"], "--fps nan: expected a finite fps > 0"),
     (["plot", "{tmp}/garbage.parquet", "-o", "{tmp}/x.png"], "garbage.parquet: not a readable Parquet table"),
     (["show", "{tmp}/garbage.parquet", "-o", "{tmp}/x.png"], "garbage.parquet: not a readable Parquet table"),
+    # a mistyped folder was made silently; `tfm run -o` refuses it
+    (["plot", "{run}", "-o", "{tmp}/nodir/x.png"], "the folder {tmp}/nodir does not exist (create it first)"),
 ])
 def test_bad_view_arguments_exit_2_before_drawing(stored_run, tmp_path, capsys, argv, message):
     """An output suffix no writer takes, an fps the GIF cannot store (int(1000 / fps) ms in
@@ -341,7 +343,7 @@ def test_bad_view_arguments_exit_2_before_drawing(stored_run, tmp_path, capsys, 
     argv = [a.format(run=stored_run, tmp=tmp_path) for a in argv]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert message in err and "Traceback" not in err
+    assert message.format(tmp=tmp_path) in err and "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["garbage.parquet"]      # nothing drawn
 
 

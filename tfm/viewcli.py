@@ -205,7 +205,8 @@ def _output(args, default: Path, suffixes: tuple[str, ...]) -> Path:
 
     out = Path(args.output) if args.output else default
     try:
-        check_output(out, "-o", suffixes, overwrite=args.overwrite or not args.output, create=True)
+        check_output(out, "-o", suffixes, overwrite=args.overwrite or not args.output,
+                     create=not args.output)
     except OutputError as exc:
         raise ViewError(str(exc)) from None
     return out
