@@ -355,6 +355,19 @@ def test_options_a_dask_cluster_would_not_use_are_refused(tmp_path, options, mes
     assert not any(tmp_path.iterdir())        # refused before the campaign folder is made
 
 
+def test_an_unreachable_scheduler_is_refused_before_the_folder_is_claimed(tmp_path, monkeypatch):
+    """The campaign's folder and campaign.json were made, then the connection failed."""
+    distributed = pytest.importorskip("distributed")
+
+    def refused(address, timeout):        # what Client raises after its 30 s of retries
+        raise OSError(f"Timed out trying to connect to {address} after {timeout}")
+
+    monkeypatch.setattr(distributed, "Client", refused)
+    with pytest.raises(CampaignError, match="cannot reach the Dask scheduler at tcp://127.0.0.1:9"):
+        run_campaign(SMOKE, scheduler="tcp://127.0.0.1:9", results_dir=tmp_path)
+    assert not any(tmp_path.iterdir())
+
+
 def test_jobs_2_and_dask_match_jobs_1_bitwise(serial_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     results, _ = serial_run

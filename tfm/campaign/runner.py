@@ -134,6 +134,19 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
             checkpoint_every = check_every(checkpoint_every, "checkpoint-every")
         except ParameterError as exc:
             raise CampaignError(f"{exc} (or None: no checkpoints)") from None
+    # an unreachable cluster is refused before the campaign's folder is claimed
+    client = _dask_client(scheduler) if scheduler is not None else None
+    try:
+        return _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_stale, only,
+                            checkpoint_every)
+    finally:
+        if client is not None and client is not scheduler:
+            client.close()
+
+
+def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_stale, only,
+                 checkpoint_every) -> Path:
+    """run_campaign from the claim of its folder on (``client``: a connected Dask client)."""
     store = CampaignStore.for_spec(spec, results_dir)
     with store.lock():
         store.claim(spec)
@@ -150,7 +163,7 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
         if only is not None:                 # run ids, or the Run records select_runs returns
             redo &= {getattr(r, "run_id", r) for r in only}
         todo = [run for run in spec.runs if run.run_id in redo]
-        if todo and scheduler is None:
+        if todo and client is None:
             _check_memory(spec, todo, min(jobs, len(todo)))
         noted = [run for run in todo if run.notes]
         if noted and not quiet:
@@ -163,8 +176,8 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
         with stop.installed():
             if todo:
                 ckpt = None if checkpoint_every is None else (store, checkpoint_every)
-                if scheduler is not None:
-                    outcomes = _run_dask(todo, scheduler, stop)
+                if client is not None:
+                    outcomes = _run_dask(todo, client, stop)
                 elif jobs > 1 and len(todo) > 1:
                     outcomes = _run_pool(todo, jobs, ckpt, stop)
                 else:
@@ -530,49 +543,53 @@ def _scatter_maps(client, todo: list[Run]) -> dict:
     return maps
 
 
-def _run_dask(todo: list[Run], scheduler,
-              stop: _Stop | None = None) -> Iterator[tuple[Run, Outcome]]:
+def _dask_client(scheduler):
+    """A client of the cluster at ``scheduler`` (an address), or ``scheduler`` itself if it
+    is a client already."""
     try:
-        from distributed import Client, as_completed as dask_completed
-        from distributed.comm import get_address_host
+        from distributed import Client
     except ImportError:
         raise CampaignError("--scheduler needs dask.distributed: pip install 'tfm[dask]'") from None
-    own = not hasattr(scheduler, "submit")
+    if hasattr(scheduler, "submit"):
+        return scheduler
     try:
-        client = Client(scheduler, timeout="30s") if own else scheduler
+        return Client(scheduler, timeout="30s")
     except (OSError, TimeoutError) as exc:
         raise CampaignError(f"scheduler: cannot reach the Dask scheduler at {scheduler} ({exc}); is it "
                             "running, and is the address right (e.g. tcp://host:8786)?") from None
+
+
+def _run_dask(todo: list[Run], client,
+              stop: _Stop | None = None) -> Iterator[tuple[Run, Outcome]]:
+    from distributed import as_completed as dask_completed
+    from distributed.comm import get_address_host
+
+    host_threads: dict[str, int] = {}
+    for addr, info in client.scheduler_info().get("workers", {}).items():
+        host = info.get("host") or get_address_host(addr)
+        host_threads[host] = host_threads.get(host, 0) + int(info.get("nthreads", 1))
+    maps = _scatter_maps(client, todo)
+    futures = {client.submit(_execute_dask, run.params, host_threads, os.getpid(),
+                             maps.get(run.params.height_map), pure=False): run
+               for run in todo}
+    stop = stop or _Stop()
+    seen = set()
     try:
-        host_threads: dict[str, int] = {}
-        for addr, info in client.scheduler_info().get("workers", {}).items():
-            host = info.get("host") or get_address_host(addr)
-            host_threads[host] = host_threads.get(host, 0) + int(info.get("nthreads", 1))
-        maps = _scatter_maps(client, todo)
-        futures = {client.submit(_execute_dask, run.params, host_threads, os.getpid(),
-                                 maps.get(run.params.height_map), pure=False): run
-                   for run in todo}
-        stop = stop or _Stop()
-        seen = set()
-        try:
-            finished = dask_completed(list(futures))
-            while not finished.is_empty() and stop.signum is None:
-                batch = finished.next_batch(block=False)
-                if not batch:
-                    time.sleep(POLL)          # short naps: a stop request is seen at once
-                for fut in batch:
-                    try:
-                        outcome = fut.result()
-                    except Exception as exc:      # the worker died or the task was lost
-                        outcome = _failure(exc)
-                    seen.add(fut)
-                    yield futures[fut], outcome
-        finally:
-            client.cancel([f for f in futures if not f.done()])
-        if stop.signum is not None:           # finished while the campaign stopped
-            for fut in futures:
-                if fut not in seen and fut.status == "finished":
-                    yield futures[fut], fut.result()
+        finished = dask_completed(list(futures))
+        while not finished.is_empty() and stop.signum is None:
+            batch = finished.next_batch(block=False)
+            if not batch:
+                time.sleep(POLL)          # short naps: a stop request is seen at once
+            for fut in batch:
+                try:
+                    outcome = fut.result()
+                except Exception as exc:      # the worker died or the task was lost
+                    outcome = _failure(exc)
+                seen.add(fut)
+                yield futures[fut], outcome
     finally:
-        if own:
-            client.close()
+        client.cancel([f for f in futures if not f.done()])
+    if stop.signum is not None:           # finished while the campaign stopped
+        for fut in futures:
+            if fut not in seen and fut.status == "finished":
+                yield futures[fut], fut.result()
