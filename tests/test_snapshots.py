@@ -84,6 +84,29 @@ def test_write_curve_moves_the_fields_beside_the_table(tmp_path):
     assert tfm.results.read_metadata(out)["fields"] == "run.fields.nc"
 
 
+def test_a_stopped_run_leaves_no_temporary_snapshot_file(tmp_path, monkeypatch):
+    """Without fields_path the snapshots go to a temporary file; a run stopped by Ctrl-C
+    (or SIGTERM under a checkpoint) left it behind in the temporary folder, empty. A
+    fields_path the user gave is theirs: only the half-written .tmp beside it goes."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+
+    def stop(rec):
+        if rec.step == 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        tfm.simulate(spacing=1 / 16, step=2e-3, snapshots="events", progress=stop, **STANDARD)
+    assert list(tmp_path.iterdir()) == []
+    mine = tmp_path / "mine.fields.nc"
+    mine.write_bytes(b"kept")
+    with pytest.raises(KeyboardInterrupt):
+        tfm.simulate(spacing=1 / 16, step=2e-3, snapshots="events", progress=stop, fields_path=mine,
+                     **STANDARD)
+    assert list(tmp_path.iterdir()) == [mine] and mine.read_bytes() == b"kept"
+
+
 def test_no_snapshots_no_file(tmp_path):
     res = tfm.simulate(spacing=1 / 16, step=2e-3, **STANDARD)
     assert res.fields_path is None

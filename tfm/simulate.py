@@ -99,6 +99,7 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     if p.snapshots != "none":
         from .snapshots import SnapshotWriter, temporary_fields_path
 
+        own_path = fields_path is None          # a temporary file: ours to remove on failure
         fields_path = fields_path or temporary_fields_path()
         writer = SnapshotWriter(fields_path, p, layout, prob)   # the run's record and units
 
@@ -122,6 +123,8 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     except BaseException:
         if writer is not None:
             writer.abort()
+            if own_path:
+                Path(fields_path).unlink(missing_ok=True)
         raise
     if summary["warnings"]:
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
