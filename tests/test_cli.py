@@ -34,6 +34,12 @@ def test_tfm_run_writes_curve_plot_and_metadata(tmp_path, capsys):
     assert meta["version"] and meta["schema_version"] == 1
     assert meta["summary"]["pull_off_force"] > 0
     assert (tmp_path / "curve.png").stat().st_size > 1000
+    # pandas shows the record as DataFrame.attrs and keeps it when the frame is written
+    # back (it drops the tfm.* keys: a re-saved table had lost its parameters)
+    assert df.attrs["tfm"] == meta
+    df.to_parquet(tmp_path / "resaved.parquet")
+    assert read_metadata(tmp_path / "resaved.parquet") == meta
+    assert main(["plot", str(tmp_path / "resaved.parquet"), "-o", str(tmp_path / "resaved.png")]) == 0
 
 
 def test_tfm_run_bad_flag_value_exits_2(capsys):

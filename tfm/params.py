@@ -1,7 +1,7 @@
 """One frozen, validated parameter record per run, named after the paper's symbols.
 
 Hulikal, Bhattacharya & Lapusta, "A threshold-force model for adhesion and mode I
-fracture" (see ``shared/paper``). Everything is in the paper's nondimensional units:
+fracture" (docs/physics.md). Everything is in the paper's nondimensional units:
 length L*, force F* = 2 pi G L*^2 / (1 - nu), so C_ij = 1/r_ij.
 
 The record's hash (with the result schema version) is the run id, so two runs with the

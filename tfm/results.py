@@ -295,6 +295,9 @@ def write_table(df, path, params: Params | None = None, prov=None, summary=None,
         meta[b"tfm.summary"] = json.dumps(summary, sort_keys=True, default=_json_default).encode()
     for key, value in (extra or {}).items():
         meta[f"tfm.{key}".encode()] = json.dumps(value, sort_keys=True, default=_json_default).encode()
+    # the same record as pandas' DataFrame.attrs["tfm"]: pd.read_parquet shows it, and a
+    # frame written back with to_parquet keeps it (pandas drops the tfm.* keys)
+    meta[PANDAS_ATTRS] = json.dumps({"tfm": _decode(meta)}, sort_keys=True).encode()
     table = table.replace_schema_metadata(meta)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
@@ -310,6 +313,21 @@ def read_metadata(path) -> dict[str, Any]:
     import pyarrow.parquet as pq
 
     meta = pq.read_schema(path).metadata or {}
+    out = _decode(meta)
+    if not out and PANDAS_ATTRS in meta:
+        # written back by pandas: the record survives in DataFrame.attrs
+        try:
+            out = json.loads(meta[PANDAS_ATTRS]).get("tfm", {})
+        except (json.JSONDecodeError, AttributeError):
+            out = {}
+    return out
+
+
+PANDAS_ATTRS = b"PANDAS_ATTRS"      # where pandas (>= 2.1) keeps DataFrame.attrs in Parquet
+
+
+def _decode(meta: dict) -> dict[str, Any]:
+    """The tfm.* entries of Parquet metadata, JSON-decoded where they are JSON."""
     out = {}
     for key, value in meta.items():
         k = key.decode()
