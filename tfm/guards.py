@@ -49,6 +49,16 @@ class GuardError(ParameterError):
     """A valid record whose run would mean nothing (or not fit); ``allow`` overrides it."""
 
 
+def _below(x: float, limit: float, digits: int = 3) -> str:
+    """x, for a message that says it is below ``limit``, with enough digits not to read
+    as the limit itself (9.9999 steps printed as '10' under 'below 10')."""
+    text = f"{x:.{digits}g}"
+    while float(text) >= limit and digits < 17:
+        digits += 1
+        text = f"{x:.{digits}g}"
+    return text
+
+
 def _refuse(guard: str, message: str) -> None:
     raise GuardError(f"{message}. To run it anyway, allow={guard!r} (CLI: --allow {guard}).")
 
@@ -154,7 +164,8 @@ def contact_reached_note(p, max_n_contact: int) -> str | None:
     across = math.sqrt(max_n_contact / math.pi)
     if across >= MIN_SPRINGS_ACROSS_RADIUS or "coarse" in _allowed(p):
         return None
-    return (f"at most {max_n_contact} springs were in contact (as many as a disc of radius {across:.2g} "
+    return (f"at most {max_n_contact} springs were in contact (as many as a disc of radius "
+            f"{_below(across, MIN_SPRINGS_ACROSS_RADIUS, 2)} "
             f"spacings); below {MIN_SPRINGS_ACROSS_RADIUS:g} the pull-off is erratic: refine the spacing or "
             "preload deeper (allow='coarse' accepts it)")
 
@@ -190,7 +201,8 @@ def check(p, memory: bool = True) -> list[str]:
     a = contact_radius_estimate(p)
     across = a / p.spacing
     if across < MIN_SPRINGS_ACROSS_RADIUS and "coarse" not in allowed:
-        _refuse("coarse", f"spacing: only {across:.2g} springs across the contact radius at maximum "
+        _refuse("coarse", f"spacing: only {_below(across, MIN_SPRINGS_ACROSS_RADIUS, 2)} springs across the "
+                          "contact radius at maximum "
                           f"load (a ~ {a:.3g}, spacing {p.spacing:.3g}); below "
                           f"{MIN_SPRINGS_ACROSS_RADIUS:g} the pull-off is erratic (errors of 50 to 170 %; "
                           "one touching spring gives a pull-off of 0). Refine the spacing or preload deeper")
@@ -208,7 +220,8 @@ def check(p, memory: bool = True) -> list[str]:
     steps = depth / p.step
     if steps < MIN_LOADING_STEPS * (1 - 1e-9) and "step" not in allowed:
         where = "the automatic preload depth" if auto else "max_indent"
-        _refuse("step", f"step: only {steps:.3g} loading steps to {where} {depth:.3g} (step {p.step:.3g}); "
+        _refuse("step", f"step: only {_below(steps, MIN_LOADING_STEPS)} loading steps to {where} {depth:.3g} "
+                        f"(step {p.step:.3g}); "
                         f"below {MIN_LOADING_STEPS} the step shifts the pull-off by up to 16 %. Use step <= "
                         f"{depth / MIN_LOADING_STEPS:.3g}" + (", or give max_indent" if auto else ""))
     if p.tol > MAX_TOL and "tol" not in allowed:
