@@ -557,7 +557,7 @@ def _validate(p: Params) -> None:
         raise ParameterError(f"allow: expected guard names separated by commas, got {p.allow!r}")
     for name in filter(None, p.allow.split(",")):
         _choice("allow", name, tuple(GUARDS))
-    _positive("spacing", p.spacing, upper=1.0)
+    _positive("spacing", p.spacing)     # its upper bounds: the radius and the grid (below)
     a = _finite("alpha", p.alpha)
     if not -1.0 <= a <= 3.0:
         raise ParameterError(f"alpha: must be in [-1, 3], got {a!r}")
