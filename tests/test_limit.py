@@ -170,15 +170,31 @@ def test_split_preloads_pairs_deep_runs_with_their_main_run():
     assert pairs["change"].iloc[0] == pytest.approx(0.01)
 
 
-def test_tfm_limit_analyse_only_reports_pending_runs_without_running(tmp_path):
-    """`tfm limit --analyse-only` on empty results runs nothing and says what is missing."""
+def test_tfm_limit_analyse_only_with_nothing_stored_says_so_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    """`tfm limit --analyse-only` with no run and no kept point anywhere runs nothing and
+    writes nothing (it wrote a report of empty tables that read 'incomplete', exit 0)."""
     from tfm.cli import main
 
+    monkeypatch.chdir(tmp_path)                      # no results/limit/points.csv here
+    out = tmp_path / "limit"
+    assert main(["limit", "--analyse-only", "--results-dir", str(tmp_path / "results"), "--out", str(out), "-q"]) == 1
+    assert "nothing to report: no run of the limit campaigns is stored" in capsys.readouterr().err
+    assert not out.exists() and not (tmp_path / "results").exists()
+
+
+def test_tfm_limit_to_a_new_out_folder_starts_from_the_kept_points(tmp_path, monkeypatch, capsys):
+    """A new --out (to leave the repository's report alone) found no points.csv there and
+    reported 0/60 runs; it now reads the default folder's kept points and says so."""
+    from tfm.cli import main
+    from tfm.paper.limit import DEFAULT_OUT, POINTS_FILE
+
+    monkeypatch.chdir(Path(__file__).parents[1])     # the repository, which keeps results/limit
     out = tmp_path / "limit"
     assert main(["limit", "--analyse-only", "--results-dir", str(tmp_path / "results"), "--out", str(out), "-q"]) == 0
+    assert f"kept points from {Path(DEFAULT_OUT) / POINTS_FILE}" in capsys.readouterr().err
     text = (out / "REPORT.md").read_text()
-    assert "incomplete" in text and "paraboloid 0/60" in text
-    assert not (tmp_path / "results").exists()
+    assert "paraboloid 60/60" in text and "incomplete" not in text
+    assert (out / POINTS_FILE).read_text() == (Path(DEFAULT_OUT) / POINTS_FILE).read_text()
 
 
 def test_tfm_limit_refuses_bad_options(capsys):

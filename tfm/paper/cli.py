@@ -31,7 +31,9 @@ def add_limit_arguments(ap: argparse.ArgumentParser) -> None:
                     help="run nothing: fit and report the points stored so far (safe while a campaign runs)")
     checkpoint_flag(ap)
     ap.add_argument("--results-dir", default="results", help="campaign tables (default results)")
-    ap.add_argument("--out", default="results/limit", help="figure and REPORT.md (default results/limit)")
+    ap.add_argument("--out", default="results/limit",
+                    help="figure, REPORT.md and the kept points, points.csv, read from there (or, when it has "
+                         "none, from results/limit) and rewritten (default results/limit)")
     ap.add_argument("-q", "--quiet", action="store_true")
 
 

@@ -96,6 +96,7 @@ def _run_file_source(meta: dict) -> str:
 # clone, another machine) instead of computing the run again, so a campaign of many hours
 # can be finished over several sittings and refitted from the table alone.
 POINTS_FILE = "points.csv"
+DEFAULT_OUT = "results/limit"          # tfm limit --out: where the repository keeps its points
 POINT_COLUMNS = ("geometry", "run_id", "self_term", "spacing", "ratio", "max_indent", "step", "F_max", "y",
                  "step_bound", "wall_time", "warnings", "source")
 
@@ -594,7 +595,12 @@ def main_limit(args) -> int:
     specs = {geometry: load_spec_for(stem) for geometry, stem in LIMIT_CAMPAIGNS}
     computed = 0
     out_dir = Path(args.out)
-    kept = kept_points(out_dir / POINTS_FILE, specs)
+    # the kept points travel with the report; a new --out starts from the default folder's
+    source = out_dir / POINTS_FILE
+    if not source.exists() and (Path(DEFAULT_OUT) / POINTS_FILE).exists():
+        source = Path(DEFAULT_OUT) / POINTS_FILE
+        print(f"[tfm limit] {out_dir / POINTS_FILE} does not exist: kept points from {source}", file=sys.stderr)
+    kept = kept_points(source, specs)
     only = select_limit_runs(specs, args.max_ratio, args.where)
     if not args.analyse_only:
         # a run with a kept point is not computed again
@@ -606,7 +612,11 @@ def main_limit(args) -> int:
     frames = [stored_points(g, spec, results_dir) for g, spec in specs.items()]
     stored = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()
     points = merge_points(stored, kept)
-    results = fit_all(points) if len(points) else []
+    if not len(points):
+        print(f"tfm limit: nothing to report: no run of the limit campaigns is stored in {results_dir} "
+              f"and no kept point in {source}; run `tfm limit` to compute them", file=sys.stderr)
+        return 1
+    results = fit_all(points)
     out_dir.mkdir(parents=True, exist_ok=True)
     if len(points):
         write_points(out_dir / POINTS_FILE, points)
