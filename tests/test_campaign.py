@@ -536,7 +536,8 @@ def test_an_interrupted_campaign_stores_what_finished_and_keeps_checkpoints(tmp_
     err = err.decode()
     assert proc.returncode == 128 + sig, err
     assert "Traceback" not in err and f"interrupted by {signal.Signals(sig).name}" in err
-    assert f"To resume, run tfm campaign run {path} again" in err
+    # with the results folder: without it the command would have started afresh in results/
+    assert f"To resume, run tfm campaign run {path} --results-dir {tmp_path} again" in err
     st = store.status(spec)
     assert st.done == [short] and st.pending == long and st.failed == []
     assert load_tables(store.root)[0]["run_id"].tolist() == [short]
