@@ -42,6 +42,22 @@ def test_tfm_run_writes_curve_plot_and_metadata(tmp_path, capsys):
     assert main(["plot", str(tmp_path / "resaved.parquet"), "-o", str(tmp_path / "resaved.png")]) == 0
 
 
+def test_the_printed_summary_is_strict_json(tmp_path, capsys):
+    """A run without tension has no pull-off indent (NaN): it was printed as NaN, which
+    jq and other strict JSON readers refuse. It is null now."""
+    import json
+
+    out = tmp_path / "hertz.parquet"
+    assert main(["run", "--spacing", "1/16", "--f-th", "0", "--alpha", "0", "--shape", "paraboloid",
+                 "--max-indent", "0.02", "--step", "2e-3", "--no-plot", "-o", str(out)]) == 0
+
+    def refuse(name):
+        raise ValueError(f"not JSON: {name}")
+
+    shown = json.loads(capsys.readouterr().out, parse_constant=refuse)
+    assert shown["pull_off_indent"] is None and shown["pull_off_force"] == 0.0
+
+
 def test_tfm_run_bad_flag_value_exits_2(capsys):
     rc = main(["run", "--spacing", "0", "-q"])
     assert rc == 2

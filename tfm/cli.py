@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import sys
 import warnings
@@ -296,14 +297,17 @@ def cmd_run(args) -> int:
     s = res.summary
     if not args.quiet:
         jump = ("jump_off_force", "jump_off_contact_radius") if p.control == "force" else ()
-        print(json.dumps({k: s[k] for k in ("pull_off_force", "pull_off_indent", "max_indent",
-                                            "max_contact_radius", *jump, "n_steps", "n_solves",
-                                            "solver_iters", "wall_time", "force_unit", "length_unit")},
-                         indent=1))
+        shown = {k: s[k] for k in ("pull_off_force", "pull_off_indent", "max_indent", "max_contact_radius",
+                                   *jump, "n_steps", "n_solves", "solver_iters", "wall_time", "force_unit",
+                                   "length_unit")}
+        # strict JSON (jq and others refuse NaN): a value that does not exist is null
+        print(json.dumps({k: None if isinstance(v, float) and not math.isfinite(v) else v
+                          for k, v in shown.items()},
+                         indent=1, allow_nan=False))
         print(f"wrote {out}" + ("" if plot_path is None else f" and {plot_path}")
               + (f" and {res.fields_path}" if res.fields_path else ""), file=sys.stderr)
     if s["warnings"]:
-        print(f"WARNING: {s['warnings']}", file=sys.stderr)
+        print(f"tfm: warning: {s['warnings']}", file=sys.stderr)
         return 3
     return 0
 
