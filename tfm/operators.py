@@ -229,7 +229,8 @@ def _kernel_advice(p: Params) -> str:
         return (f"Lower jitter (below {safe:.3g} no pair is closer than 1/self_term spacings) or try "
                 "another seed, raise self_term or change the kernel.")
     if p.kernel == "neighbors":
-        return "Raise neighbor_rings or self_term, or change the kernel."
+        return ("Raise neighbor_rings or self_term (at self_term 3.8 on the square grid, neighbor_rings 2 "
+                "or more is positive definite), or change the kernel.")
     return "Raise self_term or change the kernel."
 
 
