@@ -235,7 +235,14 @@ def test_contact_at_a_cropped_side_of_a_height_map_is_flagged(tmp_path, capsys):
     assert main(["run", "--shape", "height_map", "--height-map", strip, "--map-pixel-size", "1/64",
                  "--spacing", "1/32", "--f-th", "0", "--max-indent", "0.05", "--step", "1e-3", "-o", str(out),
                  "--no-plot"]) == 0                       # its contact stays off the cut sides
-    assert "its pixels beyond the square are not used" in capsys.readouterr().err
+    assert "reaches ±0.25 along x and ±0.5 along y, and its pixels beyond the square are not used" in \
+        capsys.readouterr().err
+    # a square map with an even pixel count leaves under a spacing unused: no note (there was)
+    even = _map(tmp_path, "even.npy", array=bowl[:64, :64])
+    assert main(["run", "--shape", "height_map", "--height-map", even, "--map-pixel-size", "1/64",
+                 "--spacing", "1/32", "--f-th", "0", "--max-indent", "0.05", "--step", "1e-3",
+                 "-o", str(tmp_path / "even.parquet"), "--no-plot"]) == 0
+    assert "not used" not in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("array, match", [

@@ -388,12 +388,15 @@ def map_unused_note(p) -> str | None:
     hm = load_height_map(p.height_map)
     a = map_pixel(p, hm)
     nx, ny = hm.heights.shape
-    reach_x, reach_y = max((nx - 1) // 2, nx - 1 - (nx - 1) // 2) * a, max((ny - 1) // 2, ny - 1 - (ny - 1) // 2) * a
+    # what a grid centred on the map could use: the shorter side of each axis (an even
+    # pixel count leaves a row over on one side, and the grid keeps whole spacings: a
+    # square map always leaves less than a spacing, which is not worth a note)
+    reach_x, reach_y = min((nx - 1) // 2, nx - 1 - (nx - 1) // 2) * a, min((ny - 1) // 2, ny - 1 - (ny - 1) // 2) * a
     hw = p.half_width
     if max(reach_x, reach_y) - hw < p.spacing * (1 - 1e-9):
         return None
     return (f"height_map: the grid is the map's largest centred square (half-width {hw:.4g}); the map "
-            f"({nx} x {ny} pixels) reaches {reach_x:.4g} along x and {reach_y:.4g} along y, and its pixels "
+            f"({nx} x {ny} pixels) reaches ±{reach_x:.4g} along x and ±{reach_y:.4g} along y, and its pixels "
             "beyond the square are not used")
 
 
