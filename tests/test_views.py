@@ -430,10 +430,20 @@ def test_the_colour_bar_says_max_f_th_when_thresholds_vary():
     if it were the threshold."""
     rng = np.random.default_rng(0)
     varied = 0.1 * (1 + 0.3 * rng.random((21, 21)))
-    _, _, labels = _colour_bar(varied)
-    assert labels[-1].startswith("max $F_{th}$ = ") and labels[-1].endswith(plots.number(varied.max(), 2))
-    _, _, labels = _colour_bar(0.1)
-    assert labels[-1] == f"$F_{{th}}$ = {plots.number(0.1, 2)}"
+    _, cbar, labels = _colour_bar(varied)
+    assert labels[-1] == "max $F_{th}$"
+    assert cbar.get_title(loc="left") == f"max $F_{{th}}$ = {plots.number(varied.max(), 2)}"
+    _, cbar, labels = _colour_bar(0.1)
+    assert labels[-1] == "$F_{th}$" and cbar.get_title(loc="left") == f"$F_{{th}}$ = {plots.number(0.1, 2)}"
+
+
+def test_the_colour_bar_label_sits_beside_its_tick_labels():
+    """The threshold's value as the top tick label ('F_th = 1.1 x 10^-4') was the widest
+    label by far and pushed the bar's label away from the bar: the value is above the bar."""
+    cmap, cbar, labels = _colour_bar(1.1e-4)
+    renderer = cbar.figure.canvas.get_renderer()
+    widths = [t.get_window_extent(renderer).width for t in cbar.get_yticklabels()]
+    assert widths[-1] <= max(widths[:-1])
 
 
 def test_the_colour_bar_of_a_run_without_adhesion_has_no_tension_half():

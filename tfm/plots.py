@@ -398,7 +398,10 @@ class ContactMap:
             if hi > 0:
                 name = "max $F_{th}$" if self.f_th_varies else "$F_{th}$"
                 ticks += [0.5 * hi, hi]
-                labels += [number(0.5 * hi, 2), f"{name} = {number(hi, 2)}"]
+                # the threshold's name at its tick, its value above the bar: a long tick
+                # label pushed the bar's label far from the bar
+                labels += [number(0.5 * hi, 2), name]
+                cb.ax.set_title(f"{name} = {number(hi, 2)}", fontsize="small", loc="left")
                 cb.ax.axhline(hi, color="k", lw=1.5)
             cb.set_ticks(ticks, labels=labels)
 
