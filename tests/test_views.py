@@ -56,6 +56,12 @@ def test_the_paper_figures_draw_a_curve(tmp_path):
         drawn = [line for ax in fig.axes for line in ax.get_lines() if len(line.get_xdata()) >= 10]
         assert drawn, name
     assert all((tmp_path / f"{k}.png").stat().st_size > 10_000 for k in (2, 3, 4))
+    # the refinement's zoom (4 pull-offs of compression) stops at the largest load when
+    # that is less: Fig. 4's axes ran to twice the data
+    top = curve["force"].max()
+    assert top < -4 * curve["force"].min()
+    ax1, ax2 = figs["refinement"].axes[:2]
+    assert ax1.get_ylim()[1] == ax2.get_xlim()[1] == pytest.approx(1.05 * top)
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
@@ -119,7 +125,7 @@ def test_an_si_figure_draws_hertz_in_newtons_and_keeps_its_caption_inside():
     d, P = hertz.get_xdata(), hertz.get_ydata()
     e_star = 2e6 / (1 - 0.3 ** 2)
     np.testing.assert_allclose(P, 4 / 3 * e_star * np.sqrt(1e-3) * d ** 1.5, rtol=1e-12)   # round-off only
-    assert ax1.get_ylabel().startswith("force $P$ in N") and ax2.get_ylabel().endswith("in m")
+    assert ax1.get_ylabel().startswith("force $P$ in N") and _no_offset(ax2.get_ylabel()).endswith("in m")
     caption = fig._suptitle.get_text()
     assert caption.count("\n") == 1 and caption.replace(",\n", ", ") == plots.run_caption(p)
     paper = tfm.Params.from_dict(dict(STANDARD, spacing=1 / 128))
@@ -359,8 +365,25 @@ def test_the_fps_range_is_what_a_gif_can_store():
 
 # ---- contact maps: units, colour bar, contact line ----------------------------------------
 def _no_offset(label):
-    """An axis label without the common factor that plots.fold_x_offsets adds on saving."""
+    """An axis label without the common factor that plots.fold_offsets adds on saving."""
     return re.sub(r" \(\$\\times.*\)$", "", label)
+
+
+def test_a_common_factor_goes_into_its_axis_label(stored_run, tmp_path):
+    """The ×10⁻² of a y axis sat above it and ran into the panel's title (results/paper
+    fig6, panel b); like the x axis' below it, it is now part of the label."""
+    from tfm.viewcli import load_run
+
+    curve, params, _ = load_run(stored_run)
+    fig = plots.plot_curve(curve, params, tmp_path / "c.png")
+    folded = []
+    for ax in fig.axes:
+        for axis, label in ((ax.xaxis, ax.get_xlabel()), (ax.yaxis, ax.get_ylabel())):
+            offset = axis.get_major_formatter().get_offset()
+            if offset:
+                assert label.endswith(f"({offset})") and not axis.get_offset_text().get_visible()
+                folded.append(axis.axis_name)
+    assert "y" in folded                  # forces of order 1e-3: the y axes have a factor
 
 
 def test_show_and_animate_of_an_si_run_name_the_units_like_tfm_plot(si_run, monkeypatch, tmp_path):
@@ -376,9 +399,10 @@ def test_show_and_animate_of_an_si_run_name_the_units_like_tfm_plot(si_run, monk
 
     def assert_units(fig):
         ax_map, ax_curve, cbar = fig.axes[:3]
-        assert (_no_offset(ax_map.get_xlabel()), ax_map.get_ylabel()) == ("$x$ in m", "$y$ in m")
+        assert (_no_offset(ax_map.get_xlabel()), _no_offset(ax_map.get_ylabel())) == ("$x$ in m", "$y$ in m")
         assert cbar.get_ylabel() == "spring force $F$ in N (tension > 0)"
-        assert ax_curve.get_ylabel() == reference.get_ylabel() == "force $P$ in N (compression > 0)"
+        assert _no_offset(ax_curve.get_ylabel()) == _no_offset(reference.get_ylabel()) == \
+            "force $P$ in N (compression > 0)"
         assert _no_offset(ax_curve.get_xlabel()) == _no_offset(reference.get_xlabel()) == "indentation $\\delta = -d$ in m"
         title = fig._suptitle.get_text().splitlines()[-1]
         assert re.search(r"\$\\delta\$ = .* m, \$P\$ = .* N, ", title), title
@@ -400,7 +424,7 @@ def test_paper_unit_contact_maps_keep_their_labels(stored_run):
     ax_map, ax_curve, cbar = fig.axes[:3]
     assert (ax_map.get_xlabel(), ax_map.get_ylabel()) == ("$x$", "$y$")
     assert cbar.get_ylabel() == "spring force $F$ (tension > 0)"
-    assert (_no_offset(ax_curve.get_xlabel()), ax_curve.get_ylabel()) == \
+    assert (_no_offset(ax_curve.get_xlabel()), _no_offset(ax_curve.get_ylabel())) == \
         ("indentation $\\delta = -d$", "force $P$ (compression > 0)")
     assert " m," not in fig._suptitle.get_text() and " N," not in fig._suptitle.get_text()
 

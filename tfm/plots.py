@@ -95,20 +95,21 @@ def fraction_ticks(ax, spacings):
     ax.xaxis.set_minor_locator(NullLocator())
 
 
-def fold_x_offsets(fig):
-    """Move a linear x axis' common factor (×10⁻²) from below the right end of the axis,
-    where a long label runs into it, into the label itself."""
+def fold_offsets(fig):
+    """Move a linear axis' common factor (×10⁻²) into its label: below the right end of
+    an x axis a long label ran into it, and above a y axis it ran into the panel's title."""
     for ax in fig.axes:
-        axis = ax.xaxis
-        fmt = axis.get_major_formatter()
-        if axis.get_scale() != "linear" or not isinstance(fmt, ScalarFormatter) or not ax.get_xlabel():
-            continue
-        lo, hi = ax.get_xlim()
-        fmt.set_locs([t for t in axis.get_majorticklocs() if min(lo, hi) <= t <= max(lo, hi)])
-        offset = fmt.get_offset()
-        if offset and "(" + offset not in ax.get_xlabel():
-            ax.set_xlabel(f"{ax.get_xlabel()} ({offset})")
-            axis.get_offset_text().set_visible(False)
+        for axis, get_label, set_label, lim in ((ax.xaxis, ax.get_xlabel, ax.set_xlabel, ax.get_xlim),
+                                                (ax.yaxis, ax.get_ylabel, ax.set_ylabel, ax.get_ylim)):
+            fmt = axis.get_major_formatter()
+            if axis.get_scale() != "linear" or not isinstance(fmt, ScalarFormatter) or not get_label():
+                continue
+            lo, hi = lim()
+            fmt.set_locs([t for t in axis.get_majorticklocs() if min(lo, hi) <= t <= max(lo, hi)])
+            offset = fmt.get_offset()
+            if offset and "(" + offset not in get_label():
+                set_label(f"{get_label()} ({offset})")
+                axis.get_offset_text().set_visible(False)
 
 
 def number(x, digits=3) -> str:
@@ -210,7 +211,7 @@ def reference_label(p) -> str | None:
 
 
 def _save(fig, path):
-    fold_x_offsets(fig)
+    fold_offsets(fig)
     if path is not None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=DPI)
@@ -601,9 +602,12 @@ def plot_refinement(curves, radius, k_ic=None, path=None, title=None, zoom=True,
     ax2.set_xlabel(FORCE_LABEL)
     ax2.set_ylabel("contact radius $a$")
     if zoom and fmin < 0:
-        ax1.set_ylim(1.3 * fmin, -4.0 * fmin)
+        # up to 4 pull-offs of compression, or the largest load if that is less (Fig. 4 at
+        # 1/64-1/256 reached 0.1 on an axis running to 0.2)
+        top = min(-4.0 * fmin, 1.05 * max(float(c["force"].max()) for c in curves.values()))
+        ax1.set_ylim(1.3 * fmin, top)
         ax1.set_xlim(xmin - 0.1 * (xmax - xmin), xmax)
-        ax2.set_xlim(1.3 * fmin, -4.0 * fmin)
+        ax2.set_xlim(1.3 * fmin, top)
     for ax in (ax1, ax2):
         ax.axhline(0, color="0.7", lw=0.5)
     ax1.legend(fontsize=6)

@@ -318,6 +318,7 @@ def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = Tr
             if cmap is None:
                 cmap = plots.ContactMap(ax_map, fields, snap, vlim=vlim, params=params)
                 plots.tidy_ticks(ax_map)
+                plots.fold_offsets(fig)          # the axes are fixed: as tfm show draws them
             else:
                 cmap.update(snap)
             title.set_text(head + plots.snapshot_title(snap, params))
