@@ -105,6 +105,10 @@ def test_an_si_caption_names_the_work_of_adhesion_and_the_units():
     text = plots.run_caption(p)
     assert "\\gamma$ = 0.05 J/m$^2$" in text and "$E$ = $10^{6}$ Pa" in text and "\\nu$ = 0.5" in text
     assert "$R$ = 0.001 m" in text and "step $10^{-6}$ m" in text
+    # and c, which sets K_th from gamma: runs at c = paper and c = 7 had the same caption
+    # and pull-offs 12 % apart
+    assert "$c$ = 7.6 (paper)" in text
+    assert "$c$ = 7," in plots.run_caption(p.replace(k_th_coefficient=7.0))
     q = tfm.Params.from_dict(dict(si, f_th=2e-6, alpha=0))
     assert "$F_{th}$ = $2\\times10^{-6}$ N" in plots.run_caption(q)
 

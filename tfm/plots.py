@@ -145,8 +145,13 @@ def run_caption(p) -> str:
         body += f" $R$ = {p.radius:g}{m}"
     if p.f_th is not None:
         thr = f"$F_{{th}}$ = {number(p.f_th)}{N}"
-    elif si:                  # K_th follows from the work of adhesion (tfm.units)
-        thr = f"$F_{{th}} = K_{{th}}A^{{3/4}}$ from $\\gamma$ = {number(p.work_of_adhesion)} J/m$^2$"
+    elif si:                  # K_th follows from the work of adhesion and c (tfm.units)
+        from .units import resolve_coefficient
+
+        c = p.k_th_coefficient
+        name = f" ({c})" if isinstance(c, str) else ""
+        thr = (f"$F_{{th}} = K_{{th}}A^{{3/4}}$ from $\\gamma$ = {number(p.work_of_adhesion)} J/m$^2$, "
+               f"$c$ = {number(resolve_coefficient(c), 4)}{name}")
     else:
         thr = f"$F_{{th}} = K_{{th}}A^{{\\alpha}}$, $K_{{th}}$ = {number(p.k_th)}, $\\alpha$ = {p.alpha:g}"
     parts = [body, f"$\\Delta$ = {spacing_text(p.spacing)}{m}", thr]
