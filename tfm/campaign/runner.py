@@ -523,7 +523,7 @@ def _execute_dask(params, host_threads: dict[str, int], client_pid: int, height_
                                  f"{str(params.height_map_hash)[:12]}... (the file changed since)")
         maps = {params.height_map: sent}
     with given_maps(maps):
-        outcome = execute(params, f"dask[{threads} threads]")
+        outcome = execute(params, f"dask[{threads} thread{'s' if threads != 1 else ''}]")
     res = outcome.result
     if res is not None and res.fields_path is not None:
         # the worker's disk may not be the client's: send the snapshot file back
