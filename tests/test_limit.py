@@ -338,3 +338,40 @@ def test_limit_figure_legends_are_outside_the_axes(tmp_path, monkeypatch):
         # and inside the figure: not cut off by the saved image's edge
         assert fig.bbox.contains(legend.x0, legend.y0) and fig.bbox.contains(legend.x1, legend.y1)
     plt.close(fig)
+
+
+# ---- tfm paper: its report's links and its exit status --------------------------------------
+def test_the_paper_reports_links_hold_from_any_out_folder(tmp_path):
+    """The links were written for results/paper/ (../../campaigns/...); from --quick's
+    results/quick/paper/ they pointed nowhere."""
+    from tfm.paper.report import _link
+    from tfm.paper.run import REPO
+
+    toml = REPO / "campaigns" / "paper_fig2_hertz.toml"
+    for out in (REPO / "results" / "paper", REPO / "results" / "quick" / "paper", tmp_path / "a" / "b"):
+        assert (out / _link(toml, out / "REPORT.md")).resolve() == toml.resolve()
+    assert _link(toml, REPO / "results" / "paper" / "REPORT.md") == "../../campaigns/paper_fig2_hertz.toml"
+
+
+@pytest.mark.parametrize("quick, status", [(False, 1), (True, 0)])
+def test_tfm_paper_exits_1_when_a_claim_does_not_hold(tmp_path, monkeypatch, capsys, quick, status):
+    """A claim that fails ('no' in the report) ended with exit 0 and nothing on stderr.
+    At --quick's doubled spacings failures are expected: named, exit 0."""
+    import argparse
+
+    from tfm.paper import claims, cli, report, run
+    from tfm.paper.claims import Claim, Finding
+
+    failing = Finding(claims=[Claim("Fig. 3", "the force turns tensile", "yes", "no", "no"),
+                              Claim("Fig. 2", "Hertz", "yes", "yes", "yes")])
+    monkeypatch.setattr(run, "run_all", lambda *a, **k: {})
+    monkeypatch.setattr(claims, "CLAIMS", {})
+    monkeypatch.setattr(report, "draw_figures", lambda findings, out: {})
+    monkeypatch.setattr(report, "merge", lambda findings: failing)
+    monkeypatch.setattr(report, "write_report", lambda *a, **k: None)
+    args = argparse.Namespace(jobs=1, quick=quick, results_dir=str(tmp_path / "r"), out=str(tmp_path / "o"),
+                              quiet=True)
+    assert cli.cmd_paper(args) == status
+    err = capsys.readouterr().err
+    assert "1 of the paper's claims do not hold here: Fig. 3 (the force turns tensile)" in err
+    assert ("expected at --quick's doubled spacings" in err) == quick

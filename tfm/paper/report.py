@@ -184,6 +184,11 @@ def discussion(n: dict, limit_line: str | None = None) -> list[str]:
     return out
 
 
+def _link(target: Path, report: Path) -> str:
+    """A Markdown link to ``target`` from the report's folder (which --out may move)."""
+    return Path(os.path.relpath(Path(target).resolve(), Path(report).resolve().parent)).as_posix()
+
+
 def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], wall: float, jobs: int,
                  start_machine: dict, quick: bool, limit_line: str | None = None) -> None:
     m = machine()
@@ -202,8 +207,8 @@ def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], 
         "quoted with its preload δ_max (see the tables), and every preload is deeper than the JKR",
         "critical radius needs: sqrt(R δ_max) ≥ 1.2 a_c (docs/physics.md, §6).",
         "",
-        "Beyond the paper: [the continuum limit of the pull-off coefficient](../limit/REPORT.md) "
-        "(`make limit`).",
+        "Beyond the paper: [the continuum limit of the pull-off coefficient]"
+        f"({_link(REPO / 'results' / 'limit' / 'REPORT.md', path)}) (`make limit`).",
         "",
     ]
     if quick:
@@ -236,12 +241,13 @@ def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], 
     lines += [
         "- campaigns (results in `results/<name>/`; `make paper` again resumes and only analyses):",
         "",
-        "| campaign | runs | computed now | wall time (s) | what |",
+        "| campaign | runs | computed now | wall time (s) | what" + (" (the full-size values: halve the "
+                                                                    "spacings and steps)" if quick else "") + " |",
         "|---|---|---|---|---|",
     ]
     for r in runs.values():
-        rel = r.path.relative_to(REPO) if r.path.is_relative_to(REPO) else r.path
-        lines.append(f"| [`{r.name}`](../../{rel}) | {r.n_runs} | {r.computed} | {r.seconds:.0f} | {r.description} |")
+        lines.append(f"| [`{r.name}`]({_link(r.path, path)}) | {r.n_runs} | {r.computed} | {r.seconds:.0f} | "
+                     f"{r.description} |")
     lines += ["", "## The paper's claims beside tfm's values", "",
               "| where | claim | paper | tfm | agrees |", "|---|---|---|---|---|"]
     for c in res.claims:
