@@ -10,7 +10,7 @@ results/rough/rough_sphere_table.md:
   (1975)), with sigma the rms height and beta the mean summit radius of the realized
   surface, beta = 3 sqrt(pi) / (8 sqrt(m4)) (Nayak 1971, high-bandwidth limit; m4 the
   profile's fourth spectral moment, 3/8 <(lap h)^2> for an isotropic surface);
-  gamma = pi K_th^2 / 2 and E* = 1/pi in the paper's units (PHYSICS.md);
+  gamma = pi K_th^2 / 2 and E* = 1/pi in the paper's units (docs/physics.md);
 - the hysteresis (energy dissipated in the load-unload cycle, tfm.analysis.hysteresis)
   against the rms height, with the smooth sphere's;
 - mean and seed-to-seed standard deviation over the roughness seeds.

@@ -20,8 +20,8 @@ import numpy as np
 E_STAR = 1.0 / math.pi          # plane-strain modulus in units of F*/L*^2
 PAPER_COEFFICIENT = 7.6          # F_max / (K_th^2 R), the paper's measurement
 JKR_COEFFICIENT = 3.0 * math.pi ** 2 / 4.0   # 7.402..., from JKR + LEFM
-# Love's regularization of C_ii: 1/r integrated over a unit square (PHYSICS.md, "The
-# self term"), at its centre and averaged over it; the paper uses 3.8.
+# Love's regularization of C_ii: 1/r integrated over a unit square (docs/physics.md, section 1,
+# the self term), at its centre and averaged over it; the paper uses 3.8.
 SELF_TERM_CENTRE = 4.0 * math.log(1.0 + math.sqrt(2.0))                              # 3.5255
 SELF_TERM_MEAN = 4.0 * (math.log(1.0 + math.sqrt(2.0)) - (math.sqrt(2.0) - 1.0) / 3.0)   # 2.9732
 PAPER_SELF_TERM = 3.8
