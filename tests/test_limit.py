@@ -143,7 +143,7 @@ def test_limit_campaign_covers_the_range(stem):
         assert p.alpha == 0.75 and p.kernel == "boussinesq"
         if p.shape == "paraboloid":
             a_c = theory.jkr_critical_radius(theory.effective_toughness(p.threshold_force, p.spacing), p.radius)
-            assert math.sqrt(p.radius * p.delta_max) >= 1.2 * a_c      # deep enough (PHYSICS.md)
+            assert math.sqrt(p.radius * p.delta_max) >= 1.2 * a_c      # deep enough (docs/physics.md)
         else:
             assert p.shape == "flat_punch"
 

@@ -119,7 +119,7 @@ def test_solver_non_convergence_is_reported():
 def test_winkler_pull_off_exact_discrete_and_continuum_limit():
     """Local kernel at alpha = 1. The springs are independent, so the exact discrete answer
     is a sum over springs: those in contact at the preload that have not yet reached
-    sigma_th. The continuum limit is pi c_w k_th^2 R (PHYSICS.md)."""
+    sigma_th. The continuum limit is pi c_w k_th^2 R (docs/physics.md)."""
     p = Params.from_dict(dict(spacing="1/64", kernel="local", c_w=1.0, alpha=1.0, k_th=0.05,
                               shape="paraboloid", max_indent="auto", step=1e-4))
     res = simulate(p)
