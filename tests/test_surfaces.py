@@ -168,6 +168,28 @@ def test_height_map_run_id_follows_content_not_path(tmp_path):
     assert pa.replace(height_map=c).height_map_hash == pc.height_map_hash
 
 
+def test_a_map_changed_after_its_run_was_made_is_refused_when_the_run_starts(tmp_path):
+    """A campaign validates its records first and runs them later: a map file changed in
+    between ran with the new heights and was stored under the old content's run id (its
+    height_map_hash), so the table held a wrong row for good. The run now fails, named."""
+    from tfm import simulate
+    from tfm.campaign import load_failures, load_tables, run_campaign, spec_from_dict
+
+    a, b = _map(tmp_path, "a.npy"), _map(tmp_path, "b.npy", seed=1)
+    kw = dict(shape="height_map", spacing="1/32", map_pixel_size="1/32", f_th=0.0, max_indent=1e-3, step=1e-4)
+    p = Params.from_dict(dict(kw, height_map=a))
+    np.save(a, np.load(b))
+    with pytest.raises(ValueError, match="a.npy has changed since the run was made"):
+        simulate(p)
+    _map(tmp_path, "c.npy", seed=2)
+    spec = spec_from_dict({"name": "maps", "base": kw, "sweep": {"height_map": [b, str(tmp_path / "c.npy")]}})
+    np.save(tmp_path / "c.npy", np.load(b))                 # changed after validation
+    root = run_campaign(spec, results_dir=tmp_path / "res", quiet=True)
+    summary, _ = load_tables(root)
+    assert summary["p_height_map"].tolist() == [b]
+    assert "c.npy has changed since the run was made" in load_failures(root)["error"].iloc[0]
+
+
 def test_height_map_record_is_usable_from_any_folder(tmp_path, monkeypatch):
     """A map given by a relative path is stored as an absolute one: the record rebuilds
     (and finds its map) from another working directory, with the same run id."""

@@ -401,6 +401,13 @@ def map_unused_note(p) -> str | None:
 
 
 def map_heights(p, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """The run's height map at the spring positions."""
+    """The run's height map at the spring positions: the heights its run id was made
+    from (height_map_hash), or MapError. The record is checked when it is made, but a run
+    of a campaign starts later: a file changed in between ran, and was stored under the
+    old content's run id."""
     hm = load_height_map(p.height_map)
+    if p.height_map_hash is not None and hm.sha256 != p.height_map_hash:
+        raise MapError(f"height_map: {p.height_map} has changed since the run was made: its content hash is "
+                       f"{hm.sha256[:12]}..., the run's (height_map_hash) {p.height_map_hash[:12]}.... "
+                       "Restore the file, or make the run again from the new file")
     return sample(heights_in_run_units(p, hm), map_pixel(p, hm), x, y)
