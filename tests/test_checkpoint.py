@@ -181,6 +181,27 @@ def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path,
         simulate(P, keep_checkpoint=True)
 
 
+def test_a_damaged_checkpoint_is_set_aside_not_a_failure_for_good(tmp_path, capsys):
+    """A truncated checkpoint (or one with a flipped bit) raised BadZipFile: its run
+    failed on every retry and `tfm campaign status` crashed. It is now reported as
+    unreadable, and the run starts afresh, warned, with the same result."""
+    spec = load_spec(SMOKE)
+    reference = run_campaign(spec, results_dir=tmp_path / "ref", quiet=True)
+    store = CampaignStore.for_spec(spec, tmp_path / "res")
+    rid = spec.runs[0].run_id
+    store.checkpoint_path(rid).parent.mkdir(parents=True)
+    store.checkpoint_path(rid).write_bytes(b"PK\x03\x04" + bytes(200))       # a cut-off archive
+    assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path / "res"), "-v"]) == 0
+    assert "cannot be read (damaged?): the run will start afresh" in capsys.readouterr().out
+    root = run_campaign(spec, results_dir=tmp_path / "res")
+    assert "cannot be read (BadZipFile" in capsys.readouterr().err          # a campaign's warning line
+    summary, curves = load_tables(root)
+    ref_summary, ref_curves = load_tables(reference)
+    pd.testing.assert_frame_equal(curves, ref_curves)
+    row = summary.set_index("run_id").loc[rid]
+    assert "cannot be read" in row["prov_checkpoint_set_aside"] and row["prov_resumed_at_step"] == 0
+
+
 @pytest.mark.parametrize("changes, options, expected", [
     ({"control": "force", "max_load": 0.01, "load_step": 1e-3, "max_indent": "auto"}, {}, "only displacement-controlled"),
     ({"snapshots": 5}, {}, "field snapshots"),

@@ -31,6 +31,7 @@ import sys
 import threading
 import time
 import warnings
+import zipfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -155,9 +156,9 @@ class Checkpoint:
     def saved_run_id(self) -> str | None:
         """The run id the file here was saved for (None: no file, or not a readable checkpoint)."""
         try:
-            with np.load(self.path, allow_pickle=False) as z:
+            with open(self.path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
                 return json.loads(str(z["meta"])).get("run_id")
-        except (OSError, ValueError, KeyError, AttributeError):
+        except UNREADABLE + (AttributeError,):
             return None
 
     def foreign(self) -> str | None:
@@ -180,11 +181,12 @@ class Checkpoint:
             if fh.read(2) != b"PK":        # NumPy calls any other file "pickled data"
                 return self._refuse("cannot be read (not an .npz archive)")
         try:
-            with np.load(self.path, allow_pickle=False) as z:
+            # our own file object: np.load leaves its own open when the archive is damaged
+            with open(self.path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
                 arrays = {key: z[key] for key in z.files}
             meta = json.loads(str(arrays.pop("meta")))
-        except (OSError, ValueError, KeyError) as exc:
-            return self._refuse(f"cannot be read ({exc})")
+        except UNREADABLE as exc:          # a truncated or damaged file too (BadZipFile)
+            return self._refuse(f"cannot be read ({type(exc).__name__}: {exc})")
         if meta.get("format") != FORMAT:
             return self._refuse(f"has format {meta.get('format')!r}, this engine reads {FORMAT}")
         if meta.get("run_id") != self.run_id:
@@ -239,15 +241,20 @@ class Checkpoint:
         self.path.unlink(missing_ok=True)
 
 
+# what reading a damaged checkpoint raises: a truncated archive or a flipped bit gives
+# zipfile.BadZipFile ("Bad CRC-32"), which is none of the others
+UNREADABLE = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile)
+
+
 def read_meta(path: str | os.PathLike) -> dict | None:
     """A checkpoint's metadata (run_id, steps done, phase, elapsed, written_at), or None
     if it cannot be read."""
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
         meta.pop("carried", None)
         return meta
-    except (OSError, ValueError, KeyError):
+    except UNREADABLE:
         return None
 
 

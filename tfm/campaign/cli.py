@@ -150,10 +150,13 @@ def _checkpoints(store, run_ids) -> dict[str, str]:
     for rid in run_ids:
         path = store.checkpoint_path(rid)
         if path.exists():
-            meta = read_meta(path) or {}
-            saved[rid] = (f"checkpoint: {meta.get('steps', '?')} steps, "
-                          f"{float(meta.get('elapsed', float('nan'))) / 60:.1f} min, "
-                          f"written {meta.get('written_at', '?')}")
+            meta = read_meta(path)
+            if meta is None:
+                saved[rid] = f"checkpoint {path} cannot be read (damaged?): the run will start afresh"
+                continue
+            elapsed = float(meta.get("elapsed", float("nan")))
+            spent = f"{elapsed:.0f} s" if elapsed < 60 else f"{elapsed / 60:.1f} min"
+            saved[rid] = f"checkpoint: {meta.get('steps', '?')} steps, {spent}, written {meta.get('written_at', '?')}"
     return saved
 
 
