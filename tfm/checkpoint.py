@@ -80,11 +80,24 @@ def check_every(every, name: str = "checkpoint_every") -> float:
     return float(every)
 
 
+_PATIENT = False
+
+
+def stop_patiently() -> None:
+    """In this process a second SIGTERM does not stop a run at once: a campaign's pool
+    worker gets its SIGTERMs from the campaign and from the pool, which terminates every
+    worker when the first one exits. That is no user insisting, and it stopped a worker
+    before it had saved its step in progress."""
+    global _PATIENT
+    _PATIENT = True
+
+
 class StopRequest:
     """SIGINT and SIGTERM while a checkpointed run computes: remembered, and acted on at the
     next step boundary (``pending``), where the run saves its state and calls ``deliver``.
     Installed only in the main thread (only it may handle signals) and only for signals
-    that are not ignored (a campaign's pool workers ignore SIGINT: their campaign decides)."""
+    that are not ignored (a campaign's pool workers ignore SIGINT: their campaign decides).
+    A second signal stops at once, except after ``stop_patiently()``."""
 
     def __init__(self, path):
         self.path = path
@@ -96,11 +109,17 @@ class StopRequest:
         return self.signum is not None
 
     def __call__(self, signum, frame):
+        if self.signum is not None and _PATIENT:
+            return                         # it stops after the step in progress anyway
         if self.signum is not None:        # the second signal: at once
             self.signum = signum
             self.deliver()
             return
         self.signum = signum
+        if _PATIENT:                       # a campaign's worker: its campaign sent the signal
+            print(f"tfm: stopping after the step in progress, to save the run's state in {self.path}",
+                  file=sys.stderr, flush=True)
+            return
         print(f"tfm: {signal.Signals(signum).name}: stopping after the step in progress, to save the "
               f"run's state in {self.path} (a second signal stops at once)", file=sys.stderr, flush=True)
 

@@ -343,6 +343,9 @@ def _pool_init(threads: int, started=None) -> None:
     _STARTED = started
     # Ctrl-C reaches the whole process group: the campaign process decides what stops
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from ..checkpoint import stop_patiently
+
+    stop_patiently()
     _die_with_parent()
     _set_threads(threads)
 
