@@ -167,7 +167,7 @@ def test_tables_have_expected_columns_and_rows(serial_run):
     assert [c for c in summary.columns if c.startswith("p_")] == ["p_" + n for n in Params.field_names()]
     for col in ("r_pull_off_force", "r_pull_off_indent", "r_max_contact_radius", "r_n_solves",
                 "r_solver_iters", "r_wall_time", "r_contact_reached_edge", "r_solver_not_converged",
-                "prov_tfm_version", "prov_git_commit", "prov_numba_version", "prov_numpy_version",
+                "prov_tfm_version", "prov_git_commit", "prov_code_hash", "prov_numba_version", "prov_numpy_version",
                 "prov_host", "prov_started_at", "prov_numba_threads"):
         assert col in summary.columns, col
     assert all(c in ("run_id", "status", "fields_path") or c.split("_", 1)[0] in ("p", "r", "prov") for c in summary.columns)
@@ -203,26 +203,44 @@ def test_rerun_does_no_work(serial_run, monkeypatch):
 
 def test_runs_from_other_code_are_reported_stale_and_can_be_rerun(tmp_path, monkeypatch, capsys):
     """The run id hashes parameters, not code: resume must say when stored runs came from
-    another commit, and --rerun-stale must recompute them."""
+    other source code, and --rerun-stale must recompute them. Other code is another hash
+    of tfm's files: runs from uncommitted edits (the same commit, '-dirty') were not
+    stale, and every commit, even one that left tfm/ alone, made all runs stale."""
     spec = spec_from_dict({"name": "stale", "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
                                                      "max_indent": 0.05, "step": 5e-3},
                            "sweep": {"alpha": [0.5, 0.75]}}, source="stale")
     run_campaign(spec, quiet=True, results_dir=tmp_path)
     store = CampaignStore.for_spec(spec, tmp_path)
     assert store.status(spec).stale == []
-    monkeypatch.setattr("tfm.campaign.store.git_commit", lambda: "0" * 40)
+    monkeypatch.setattr("tfm.campaign.store.loaded_commit", lambda: "0" * 40)    # tfm/ untouched
+    assert store.status(spec).stale == []
+    monkeypatch.setattr("tfm.campaign.store.code_hash", lambda: "0" * 64)        # tfm/ edited
     assert len(store.status(spec).stale) == 2
     calls = []
     real = importlib.import_module("tfm.campaign.runner").execute
     monkeypatch.setattr("tfm.campaign.runner.execute", lambda *a, **k: calls.append(1) or real(*a, **k))
     run_campaign(spec, results_dir=tmp_path)
     err = capsys.readouterr().err
-    assert calls == [] and "computed by another tfm version or commit" in err
+    assert calls == [] and "computed by other tfm source code" in err
     assert "nothing to run, 2 of 2 runs already done" in err          # it said nothing at all
     run_campaign(spec, results_dir=tmp_path, rerun_stale=True)
     assert len(calls) == 2
     # the recomputed runs were counted as done and as already done ("6 ... 6 already done")
     assert "2 runs done, 0 failed, 0 already done" in capsys.readouterr().err
+
+
+def test_the_code_a_process_computes_with_is_read_once(monkeypatch):
+    """A campaign's runs took the commit from the disk as each run started: after a commit
+    made mid-campaign, runs computed by the code already loaded were labelled with the new
+    commit (and a checkpoint with the new files' hash). Both are read once per process."""
+    import tfm.results as results
+
+    commit, code = results.loaded_commit(), results.code_hash()
+    monkeypatch.setattr(results, "git_commit", lambda: "f" * 40)          # a commit meanwhile
+    monkeypatch.setattr(results.Path, "rglob", lambda *a: iter(()))       # files edited meanwhile
+    assert results.loaded_commit() == commit and results.code_hash() == code
+    prov = results.provenance()
+    assert (prov["git_commit"], prov["code_hash"]) == (commit, code)
 
 
 def test_tables_follow_rewritten_runs_and_an_edited_file(tmp_path, monkeypatch):
@@ -245,14 +263,14 @@ def test_tables_follow_rewritten_runs_and_an_edited_file(tmp_path, monkeypatch):
 
     monkeypatch.setattr(sim_module, "simulate", failing("first failure"))
     root = run_campaign(spec, quiet=True, results_dir=tmp_path)
-    # other code: every stored run is stale, and its recomputation carries the new commit
-    for module in ("tfm.campaign.store", "tfm.results"):
-        monkeypatch.setattr(f"{module}.git_commit", lambda: "1" * 40)
+    # other code: every stored run is stale, and its recomputation carries the new code
+    monkeypatch.setattr("tfm.results._CODE_HASH", "1" * 64)
+    monkeypatch.setattr("tfm.results._COMMIT", ["1" * 40])
     monkeypatch.setattr(sim_module, "simulate", failing("second failure"))
     run_campaign(spec, quiet=True, results_dir=tmp_path, rerun_stale=True)
     summary, _ = load_tables(root)
     assert summary["run_id"].tolist() == [spec.runs[0].run_id]
-    assert summary["prov_git_commit"].tolist() == ["1" * 40]
+    assert summary["prov_git_commit"].tolist() == ["1" * 40] and summary["prov_code_hash"].tolist() == ["1" * 64]
     stored = read_metadata(CampaignStore(root).run_path(spec.runs[0].run_id))
     assert summary["r_wall_time"].iloc[0] == stored["summary"]["wall_time"]
     assert summary["prov_started_at"].iloc[0] == stored["provenance"]["started_at"]

@@ -16,6 +16,7 @@ import pytest
 
 import tfm.checkpoint
 import tfm.protocol
+import tfm.results
 from tfm import Params, simulate
 from tfm.campaign import (CampaignError, CampaignStore, load_spec, load_tables, run_campaign,
                           spec_from_dict)
@@ -166,7 +167,7 @@ def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path,
 
     with pytest.raises(Stop):
         simulate(P, progress=stop_after(5), checkpoint=path, checkpoint_every=0)
-    monkeypatch.setattr(tfm.checkpoint, "_CODE_HASH", "another engine")
+    monkeypatch.setattr(tfm.results, "_CODE_HASH", "another engine")
     with pytest.warns(CheckpointWarning, match="another version of tfm's source"):
         res = simulate(P, checkpoint=path)
     assert res.provenance["resumed_at_step"] == 0

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
-import hashlib
 import json
 import os
 import signal
@@ -39,30 +38,15 @@ import numpy as np
 
 from .config import CHECKPOINT_EVERY
 from .params import ParameterError
+from .results import code_hash
 
 FORMAT = 1
 DONE = "done"      # the phase of a checkpoint saved after the curve's last step
-
-_CODE_HASH = None
-
 
 class CheckpointWarning(UserWarning):
     """A checkpoint that cannot serve its run was set aside; the run starts afresh. Not a
     RunWarning: those flag suspect numbers and are silenced where the summary records them,
     while this one says that saved work is not used."""
-
-
-def code_hash() -> str:
-    """sha256 of tfm's source files (names and contents): the engine that wrote a state."""
-    global _CODE_HASH
-    if _CODE_HASH is None:
-        root = Path(__file__).resolve().parent
-        h = hashlib.sha256()
-        for path in sorted(root.rglob("*.py")):
-            h.update(str(path.relative_to(root)).encode())
-            h.update(path.read_bytes())
-        _CODE_HASH = h.hexdigest()
-    return _CODE_HASH
 
 
 def why_not(p) -> str | None:

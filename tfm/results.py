@@ -7,6 +7,7 @@ n_entered, rounds, solver_iters.
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 import math
 import os
@@ -46,13 +47,40 @@ def git_commit(here: Path | None = None) -> str | None:
         return None
 
 
+_CODE_HASH = None
+_COMMIT: list = []
+
+
+def code_hash() -> str:
+    """sha256 of tfm's source files (names and contents), read once per process, when a
+    run first asks: the code this process computes with. A file edited later (during a
+    long campaign, say) is not the code loaded, so it must not be read again."""
+    global _CODE_HASH
+    if _CODE_HASH is None:
+        root = Path(__file__).resolve().parent
+        h = hashlib.sha256()
+        for path in sorted(root.rglob("*.py")):
+            h.update(str(path.relative_to(root)).encode())
+            h.update(path.read_bytes())
+        _CODE_HASH = h.hexdigest()
+    return _CODE_HASH
+
+
+def loaded_commit() -> str | None:
+    """git_commit() of tfm's checkout, read once per process, with code_hash()."""
+    if not _COMMIT:
+        _COMMIT.append(git_commit())
+    return _COMMIT[0]
+
+
 def provenance() -> dict[str, Any]:
     import numba
     import numpy as np
     import scipy
     return {
         "tfm_version": tfm_version(),
-        "git_commit": git_commit(),
+        "git_commit": loaded_commit(),
+        "code_hash": code_hash(),
         "schema_version": SCHEMA_VERSION,
         "python_version": platform.python_version(),
         "numpy_version": np.__version__,

@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 from ..params import Params
-from ..results import fields_path_for, git_commit, read_metadata, tfm_version, write_table
+from ..results import code_hash, fields_path_for, loaded_commit, read_metadata, tfm_version, write_table
 from .spec import CampaignError, CampaignSpec, Run
 
 TABLES = ("summary", "curves", "failures")
@@ -59,11 +59,17 @@ class Status:
         return len(self.done) + len(self.failed) + len(self.pending)
 
 
-def _code_identity(prov: dict[str, Any]) -> tuple:
-    """The code a run was computed with: tfm version and commit (a dirty tree counts as
-    its commit, since uncommitted edits cannot be identified anyway)."""
-    commit = (prov.get("git_commit") or "").removesuffix("-dirty") or None
-    return prov.get("tfm_version"), commit
+def _same_code(prov: dict[str, Any], here: dict[str, Any]) -> bool:
+    """Whether a stored run's provenance names the code ``here`` computes with: the hash of
+    tfm's source files, so that uncommitted edits count and a commit that leaves tfm/ alone
+    does not. Runs stored before the hash was recorded: tfm version and commit (a dirty
+    tree counting as its commit)."""
+    if prov.get("code_hash"):
+        return prov["code_hash"] == here["code_hash"]
+
+    def commit(p):
+        return (p.get("git_commit") or "").removesuffix("-dirty") or None
+    return (prov.get("tfm_version"), commit(prov)) == (here["tfm_version"], commit(here))
 
 
 class CampaignStore:
@@ -219,7 +225,7 @@ class CampaignStore:
 
     def status(self, spec: CampaignSpec) -> Status:
         done, failed, pending, flagged, stale = [], [], [], [], []
-        here = _code_identity({"tfm_version": tfm_version(), "git_commit": git_commit()})
+        here = {"tfm_version": tfm_version(), "git_commit": loaded_commit(), "code_hash": code_hash()}
         for run in spec.runs:
             rid = run.run_id
             meta = self.run_metadata(rid)
@@ -227,7 +233,7 @@ class CampaignStore:
                 done.append(rid)
                 if meta.get("summary", {}).get("warnings"):
                     flagged.append(rid)
-                if _code_identity(meta.get("provenance") or {}) != here:
+                if not _same_code(meta.get("provenance") or {}, here):
                     stale.append(rid)
             elif self.failure_path(rid).exists():
                 failed.append(rid)
