@@ -893,6 +893,14 @@ def test_status_says_when_the_tables_do_not_hold_the_stored_runs(tmp_path, capsy
     assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "2 done" in out and "the tables (summary, curves, failures) do not hold these runs yet" in out
+    # the command it gives keeps the results folder (without it: a fresh campaign in results/)
+    assert f"`tfm campaign run {toml} --results-dir {tmp_path}` rebuilds them" in out
+    # while a campaign process holds the folder, that is what status says (it said the
+    # process had stopped)
+    with store.lock():
+        assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert f"pid {os.getpid()} on" in out and "is running this campaign now" in out and "do not hold" not in out
     run_campaign(spec, quiet=True, results_dir=tmp_path)      # the same command rebuilds them
     assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
     assert "do not hold" not in capsys.readouterr().out and store.table_path("summary").exists()

@@ -120,9 +120,12 @@ def cmd_status(args) -> int:
           f"{len(st.pending)} pending, {len(st.failed)} failed"
           + (f", {len(st.stale)} computed by other tfm code (--rerun-stale)" if st.stale else "")
           + f"  [{store.root}]")
-    if (st.done or st.failed) and not store.tables_current(spec, st):
+    holder = store.running()
+    if holder:
+        print(f"  {holder} is running this campaign now: the tables are rebuilt when it finishes")
+    elif (st.done or st.failed) and not store.tables_current(spec, st):
         print(f"  the tables (summary, curves, failures) do not hold these runs yet (the campaign "
-              f"process stopped before it rebuilt them): `tfm campaign run {args.file}` rebuilds them")
+              f"process stopped before it rebuilt them): `{store.run_command(args.file)}` rebuilds them")
     saved = _checkpoints(store, st.pending + st.failed)
     if saved:
         print(f"  {len(saved)} unfinished runs have a checkpoint: they continue from it")

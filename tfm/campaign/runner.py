@@ -204,12 +204,7 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
 
 def _interrupted(spec, store, unfinished: list[Run], signum: int) -> CampaignInterrupted:
     kept = sum(store.checkpoint_path(r.run_id).exists() for r in unfinished)
-    again = "the same call"
-    if spec.origin:
-        # the results folder too: without it the command would start afresh in results/
-        where = store.root.parent
-        elsewhere = "" if where.resolve() == Path("results").resolve() else f" --results-dir {where}"
-        again = f"tfm campaign run {spec.source}{elsewhere}"
+    again = store.run_command(spec.source) if spec.origin else "the same call"
     return CampaignInterrupted(
         f"campaign {spec.name} interrupted by {signal.Signals(signum).name}: the finished runs are "
         f"stored in {store.root}; {len(unfinished)} runs did not finish, {kept} of them with a checkpoint "

@@ -98,6 +98,29 @@ class CampaignStore:
         return self.root / f"{table}.parquet"
 
     # ---- exclusive access and crash recovery -------------------------------
+    def run_command(self, source) -> str:
+        """The command that runs (or resumes) the campaign file ``source`` here: with
+        --results-dir unless the results are in results/, where the command puts them."""
+        where = self.root.parent
+        elsewhere = "" if where.resolve() == Path("results").resolve() else f" --results-dir {where}"
+        return f"tfm campaign run {source}{elsewhere}"
+
+    def running(self) -> str | None:
+        """Who holds the campaign's lock ('pid N on host'), or None if nobody does."""
+        import fcntl
+
+        try:
+            fh = open(self.root / ".lock")
+        except OSError:
+            return None
+        with fh:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return fh.read().strip() or "another process"
+            fcntl.flock(fh, fcntl.LOCK_UN)
+            return None
+
     @contextlib.contextmanager
     def lock(self, wait: float = 5.0) -> Iterator[None]:
         """Hold the campaign's lock; a second runner on the same campaign fails after
