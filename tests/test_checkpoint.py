@@ -236,7 +236,9 @@ def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, cap
     assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path / "crashed")]) == 1
     assert "1 unfinished runs have a checkpoint" in capsys.readouterr().out
 
-    run_campaign(spec, quiet=True, results_dir=tmp_path / "crashed", checkpoint_every=0)
+    # resumed with --no-checkpoints (checkpoint_every=None): the saved state still serves
+    # (it was deleted unused and the run computed again from its first step)
+    run_campaign(spec, quiet=True, results_dir=tmp_path / "crashed", checkpoint_every=None)
     assert not any(store.checkpoints_dir.iterdir())
     summary, curves = load_tables(root)
     ref_summary, ref_curves = load_tables(clean)

@@ -66,7 +66,8 @@ def checkpoint_flag(parser) -> None:
                         help="save a running curve's state this often, in <results>/<name>/checkpoints/, "
                              f"so that a killed run continues from there (default {CHECKPOINT_EVERY:g})")
     parser.add_argument("--no-checkpoints", dest="checkpoint_every", action="store_const", const=None,
-                        help="save no checkpoints (a killed run starts again from its first step)")
+                        help="save no checkpoints (a killed run starts again from its first step; "
+                             "one saved earlier is still continued from)")
 
 
 def _max_runs_flag(parser) -> None:

@@ -15,6 +15,7 @@ says how to resume.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import signal
 import sys
@@ -175,7 +176,7 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
         stop, handled = _Stop(), set()
         with stop.installed():
             if todo:
-                ckpt = None if checkpoint_every is None else (store, checkpoint_every)
+                ckpt = (store, checkpoint_every)
                 if client is not None:
                     outcomes = _run_dask(todo, client, stop)
                 elif jobs > 1 and len(todo) > 1:
@@ -295,9 +296,15 @@ def _checkpoint_args(params, ckpt) -> dict:
     if ckpt is None or why_not(params):
         return {}
     store, every = ckpt
+    path = store.checkpoint_path(params.run_id)
+    if every is None:
+        # no checkpoints: none is saved, but one saved before is still continued from
+        # (it was deleted unused, its run computed again from the start)
+        if not path.exists():
+            return {}
+        every = math.inf
     # kept until the campaign process has stored the run (CampaignStore.write_run)
-    return {"checkpoint": store.checkpoint_path(params.run_id), "checkpoint_every": every,
-            "keep_checkpoint": True, "replace_checkpoint": True}
+    return {"checkpoint": path, "checkpoint_every": every, "keep_checkpoint": True, "replace_checkpoint": True}
 
 
 def _set_threads(threads: int, set_env: bool = True) -> None:
