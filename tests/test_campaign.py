@@ -947,3 +947,24 @@ def test_a_damaged_run_file_is_named_with_its_remedy(tmp_path, capsys):
     path.unlink()
     assert tfm_main(["campaign", "run", str(toml), "--results-dir", str(tmp_path), "-q"]) == 0
     assert len(load_tables(spec, results_dir=tmp_path)[0]) == 2
+
+
+def test_one_flipped_bit_in_a_run_file_is_found(tmp_path, capsys):
+    """A flipped bit in a run file's data went unnoticed in 243 of 300 trials (Snappy pages
+    have no checksum of their own), and the table held another number. The files carry
+    page checksums now, verified on reading."""
+    import pyarrow.parquet as pq
+
+    spec = _tiny("flipped")
+    toml = _toml_of(spec, tmp_path)
+    run_campaign(spec, quiet=True, results_dir=tmp_path)
+    store = CampaignStore.for_spec(spec, tmp_path)
+    path = store.run_path(spec.runs[0].run_id)
+    chunk = pq.ParquetFile(path).metadata.row_group(0).column(4)     # the forces
+    start, size = chunk.data_page_offset, chunk.total_compressed_size
+    data = bytearray(path.read_bytes())
+    data[start + size - 9] ^= 0x04                                   # one bit in the page's data
+    path.write_bytes(bytes(data))
+    store.table_path("summary").unlink()                             # the tables are rebuilt
+    assert tfm_main(["campaign", "run", str(toml), "--results-dir", str(tmp_path), "-q"]) == 2
+    assert f"{path}: the stored run {spec.runs[0].run_id} cannot be read" in capsys.readouterr().err

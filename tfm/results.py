@@ -329,11 +329,20 @@ def write_table(df, path, params: Params | None = None, prov=None, summary=None,
     table = table.replace_schema_metadata(meta)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        pq.write_table(table, tmp)
+        # page checksums: a flipped bit on disk is found when the file is read
+        # (read_checked), where it was read as another number
+        pq.write_table(table, tmp, write_page_checksum=True)
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)          # no stray temporary file, whatever happened
     return path
+
+
+def read_checked(path):
+    """A Parquet table as a DataFrame, its page checksums verified (files that have them)."""
+    import pyarrow.parquet as pq
+
+    return pq.read_table(path, page_checksum_verification=True).to_pandas()
 
 
 def read_metadata(path) -> dict[str, Any]:

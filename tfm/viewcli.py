@@ -86,14 +86,13 @@ VIEW_COLUMNS = ("step", "phase", "indent", "force", "contact_radius", "n_contact
 def load_run(path: Path):
     """The curve, the parameter record (None if it cannot be rebuilt) and the fields path.
     Refuses a file that is not one run's curve table (ViewError)."""
-    import pandas as pd
     import pyarrow
 
     from .params import ParameterError, Params
-    from .results import fields_path_for, read_metadata
+    from .results import fields_path_for, read_checked, read_metadata
 
     try:
-        curve = pd.read_parquet(path)
+        curve = read_checked(path)
         meta = read_metadata(path)
     except (pyarrow.ArrowException, OSError) as exc:
         why = getattr(exc, "strerror", None) or "corrupt, truncated or another format"

@@ -37,7 +37,8 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator
 
 from ..params import Params
-from ..results import code_hash, fields_path_for, loaded_commit, read_metadata, tfm_version, write_table
+from ..results import (code_hash, fields_path_for, loaded_commit, read_checked, read_metadata, tfm_version,
+                       write_table)
 from .spec import CampaignError, CampaignSpec, Run
 
 TABLES = ("summary", "curves", "failures")
@@ -272,7 +273,6 @@ class CampaignStore:
         if self._tables_current(record):
             return False
         import pandas as pd
-        import pyarrow.parquet as pq
 
         by_id = {r.run_id: r for r in spec.runs}
         rows, curves = [], []
@@ -288,7 +288,7 @@ class CampaignStore:
                          **{RESULT_PREFIX + k: v for k, v in summary.items()},
                          **{PROV_PREFIX + k: v for k, v in meta.get("provenance", {}).items()}})
             try:
-                curve = pq.read_table(path).to_pandas()
+                curve = read_checked(path)
             except (OSError, ValueError) as exc:     # pyarrow's errors derive from these
                 raise CampaignError(f"{path}: the stored run {rid} cannot be read ({exc}); the file is "
                                     "damaged (a crash of the machine, a bad copy): delete it and run the "
@@ -352,7 +352,7 @@ class CampaignStore:
         if not path.exists():
             raise FileNotFoundError(f"{path}: no such table; run the campaign first "
                                     "(tfm campaign run FILE)")
-        return pd.read_parquet(path)
+        return read_checked(path)
 
 
 # ---- parameter columns with stable types ------------------------------------

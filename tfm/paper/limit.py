@@ -56,9 +56,8 @@ def coefficient(params, f_max: float) -> float:
 
 def stored_points(geometry: str, spec, results_dir: Path) -> pd.DataFrame:
     """One row per stored run of the campaign (read-only: the run files, not the tables)."""
-    import pyarrow.parquet as pq
-
     from ..campaign import CampaignStore
+    from ..results import read_checked
 
     store = CampaignStore.for_spec(spec, results_dir)
     rows = []
@@ -67,7 +66,7 @@ def stored_points(geometry: str, spec, results_dir: Path) -> pd.DataFrame:
         if meta is None:
             continue
         s, p = meta["summary"], run.params
-        curve = pq.read_table(store.run_path(run.run_id)).to_pandas()
+        curve = read_checked(store.run_path(run.run_id))
         rows.append({"geometry": geometry, "run_id": run.run_id, "self_term": p.self_term,
                      "spacing": p.spacing, "ratio": spec_ratio(p), "max_indent": p.delta_max,
                      "step": p.step, "F_max": s["pull_off_force"], "y": coefficient(p, s["pull_off_force"]),
