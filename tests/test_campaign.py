@@ -559,7 +559,7 @@ def test_an_interrupted_campaign_stores_what_finished_and_keeps_checkpoints(tmp_
     assert proc.returncode == 128 + sig, err
     assert "Traceback" not in err and f"interrupted by {signal.Signals(sig).name}" in err
     # with the results folder: without it the command would have started afresh in results/
-    assert f"To resume, run tfm campaign run {path} --results-dir {tmp_path} again" in err
+    assert f"To resume, run `tfm campaign run {path} --results-dir {tmp_path}` again" in err
     st = store.status(spec)
     assert st.done == [short] and st.pending == long and st.failed == []
     assert load_tables(store.root)[0]["run_id"].tolist() == [short]
@@ -947,6 +947,36 @@ def test_a_damaged_run_file_is_named_with_its_remedy(tmp_path, capsys):
     path.unlink()
     assert tfm_main(["campaign", "run", str(toml), "--results-dir", str(tmp_path), "-q"]) == 0
     assert len(load_tables(spec, results_dir=tmp_path)[0]) == 2
+
+
+def test_a_disk_that_refuses_a_write_stops_the_campaign_with_a_message(tmp_path, monkeypatch):
+    """A full disk or a read-only folder ended the campaign with a raw traceback (a run
+    file) or left no tables and no word that the runs were safe (the tables)."""
+    spec = _tiny("disk")
+    toml = _toml_of(spec, tmp_path)
+    real = CampaignStore.write_run
+
+    def full_after_one(self, run, *a, **k):
+        if run.index == 1:
+            raise OSError(28, "No space left on device", str(self.run_path(run.run_id)))
+        return real(self, run, *a, **k)
+
+    monkeypatch.setattr(CampaignStore, "write_run", full_after_one)
+    with pytest.raises(CampaignError, match=r"cannot store run 1 \w+ in .*: No space left on device .*The runs "
+                                            r"stored before it are kept.*run `tfm campaign run .*--results-dir"):
+        run_campaign(load_spec(toml), quiet=True, results_dir=tmp_path)
+    store = CampaignStore.for_spec(spec, tmp_path)
+    assert store.status(spec).done == [spec.runs[0].run_id]
+    monkeypatch.setattr(CampaignStore, "write_run", real)
+
+    def no_tables(self, *a, **k):
+        raise OSError(27, "File too large")
+
+    monkeypatch.setattr(CampaignStore, "write_tables", no_tables)
+    with pytest.raises(CampaignError, match="cannot write the campaign's tables in .*: File too large. Every run "
+                                            "is stored in"):
+        run_campaign(load_spec(toml), quiet=True, results_dir=tmp_path)
+    assert len(store.status(spec).done) == 2
 
 
 def test_one_flipped_bit_in_a_run_file_is_found(tmp_path, capsys):

@@ -182,6 +182,19 @@ def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path,
         simulate(P, keep_checkpoint=True)
 
 
+def test_a_checkpoint_that_cannot_be_saved_names_its_file(tmp_path, monkeypatch):
+    """On a full disk a campaign's run failed with 'OSError: [Errno 27] File too large',
+    with no word that it was the checkpoint, nor which."""
+    def full(*a, **k):
+        raise OSError(27, "File too large")
+
+    monkeypatch.setattr(np, "savez", full)
+    path = tmp_path / "run.npz"
+    with pytest.raises(OSError, match=f"cannot save the checkpoint {path}: File too large"):
+        simulate(P, checkpoint=path, checkpoint_every=0)
+    assert list(tmp_path.iterdir()) == []                 # no temporary file left either
+
+
 def test_a_damaged_checkpoint_is_set_aside_not_a_failure_for_good(tmp_path, capsys):
     """A truncated checkpoint (or one with a flipped bit) raised BadZipFile: its run
     failed on every retry and `tfm campaign status` crashed. It is now reported as

@@ -236,6 +236,8 @@ class Checkpoint:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)
             os.replace(tmp, self.path)
+        except OSError as exc:             # a full disk: say which file, not only "File too large"
+            raise OSError(exc.errno, f"cannot save the checkpoint {self.path}: {exc.strerror or exc}") from exc
         finally:
             tmp.unlink(missing_ok=True)    # a save stopped by a second Ctrl-C left it
         self._last = time.monotonic()

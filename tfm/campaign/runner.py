@@ -192,7 +192,13 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
             elif not quiet:
                 print(f"campaign {spec.name}: nothing to run, {len(status.done)} of {len(spec.runs)} runs "
                       f"already done -> {store.root}", file=sys.stderr)
-            store.write_tables(spec)
+            try:
+                store.write_tables(spec)
+            except OSError as exc:
+                raise CampaignError(
+                    f"cannot write the campaign's tables in {store.root}: {exc.strerror or exc}. Every run is "
+                    f"stored in {store.runs_dir}; free space or fix the permissions, then run "
+                    f"{_again(spec, store)} again to write them") from None
     if stop.signum is not None:
         left = [r for r in todo if r.run_id not in handled]
         if left:
@@ -205,7 +211,7 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
 
 def _interrupted(spec, store, unfinished: list[Run], signum: int) -> CampaignInterrupted:
     kept = sum(store.checkpoint_path(r.run_id).exists() for r in unfinished)
-    again = store.run_command(spec.source) if spec.origin else "the same call"
+    again = _again(spec, store)
     return CampaignInterrupted(
         f"campaign {spec.name} interrupted by {signal.Signals(signum).name}: the finished runs are "
         f"stored in {store.root}; {len(unfinished)} runs did not finish, {kept} of them with a checkpoint "
@@ -239,13 +245,13 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
     try:
         for run, outcome in outcomes:
             if outcome.result is not None:
-                store.write_run(run, outcome.result, outcome.fields_bytes)
+                _storing(run, store, spec, lambda: store.write_run(run, outcome.result, outcome.fields_bytes))
                 set_aside = outcome.result.provenance.get("checkpoint_set_aside")
                 if set_aside and not quiet:
                     bar.write(f"warning: run {run.index} {run.run_id}: {set_aside}", file=sys.stderr)
             else:
                 failed += 1
-                store.write_failure(run, outcome.error, outcome.traceback)
+                _storing(run, store, spec, lambda: store.write_failure(run, outcome.error, outcome.traceback))
                 if not quiet:
                     bar.write(f"run {run.index} {run.run_id} failed: {outcome.error}", file=sys.stderr)
             handled.add(run.run_id)
@@ -257,6 +263,26 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
     if not quiet and len(handled) == len(todo):
         print(f"campaign {spec.name}: {len(todo) - failed} runs done, {failed} failed, "
               f"{skipped} already done -> {store.root}", file=sys.stderr)
+
+
+def _again(spec, store) -> str:
+    """How to run the campaign again: its command, or, for a campaign made in Python,
+    the same call."""
+    return f"`{store.run_command(spec.source)}`" if spec.origin else "the same call"
+
+
+def _storing(run, store, spec, write) -> None:
+    """``write()`` the outcome of ``run``; a disk that refuses it (full, read-only) stops the
+    campaign with what is safe and what to do, not a traceback."""
+    try:
+        write()
+    except OSError as exc:
+        kept = store.checkpoint_path(run.run_id).exists()
+        raise CampaignError(
+            f"cannot store run {run.index} {run.run_id} in {store.root}: {exc.strerror or exc}"
+            f"{f' ({exc.filename})' if getattr(exc, 'filename', None) else ''}. The runs stored before it "
+            f"are kept{'; its finished curve is in its checkpoint' if kept else ''}. Free space or fix the "
+            f"permissions, then run {_again(spec, store)} again") from None
 
 
 def _progress(name: str, total: int, quiet: bool):
