@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 import tfm
-from tfm.plots import fold_x_offsets
+from tfm.plots import fold_offsets
 
 
 def main(out: Path) -> None:
@@ -53,7 +53,7 @@ def main(out: Path) -> None:
     ax2.legend(frameon=False)
     ax2.ticklabel_format(axis="x", style="sci", scilimits=(-2, 2))
     ax2.xaxis.set_major_locator(MaxNLocator(5))
-    fold_x_offsets(fig)                              # the common factor into the axis label
+    fold_offsets(fig)                                # the common factors into the axis labels
     fig.savefig(out / "fields.png", dpi=150)
     ds.close()
     print(f"wrote {out / 'fields.png'}")
