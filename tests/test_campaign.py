@@ -313,6 +313,21 @@ def test_status_list_and_expand_commands(serial_run, tmp_path, capsys):
     assert [line.split()[1] for line in lines] == load_spec(SMOKE).run_ids
 
 
+def test_list_does_not_count_another_files_runs_as_a_campaigns_own(tmp_path, capsys):
+    """Two files with one name: after a.toml ran, `list` showed b.toml with a.toml's done
+    runs, while `status` and `run` refuse b.toml for that folder."""
+    base = 'name = "same"\n[base]\nspacing = "1/16"\nk_th = 0.02\nshape = "paraboloid"\nmax_indent = 0.05\n' \
+           'step = 5e-3\n[sweep]\n'
+    (tmp_path / "a.toml").write_text(base + "radius = [1.0, 2.0]\n")
+    (tmp_path / "b.toml").write_text(base + "radius = [1.0, 3.0]\n")
+    run_campaign(tmp_path / "a.toml", quiet=True, results_dir=tmp_path / "res")
+    capsys.readouterr()
+    assert tfm_main(["campaign", "list", "--dir", str(tmp_path), "--results-dir", str(tmp_path / "res")]) == 0
+    a, b = capsys.readouterr().out.splitlines()
+    assert a.split()[:5] == ["a", "2", "runs", "2", "done"]
+    assert b.split()[:3] == ["b", "2", "runs"] and "holds another campaign file's results" in b and "done" not in b
+
+
 # ---- failures ------------------------------------------------------------------
 def test_a_failing_run_is_recorded_and_the_others_finish(tmp_path, monkeypatch, capsys):
     sim_module = importlib.import_module("tfm.simulate")     # the package re-exports the function

@@ -180,9 +180,14 @@ def cmd_list(args) -> int:
         except CampaignError as exc:
             print(f"{path.stem:{width}s} INVALID: {exc}")
             continue
-        st = CampaignStore.for_spec(spec, args.results_dir).status(spec)
-        line = (f"{path.stem:{width}s} {st.total:4d} runs {len(st.done):4d} done {len(st.failed):3d} failed  "
-                + " ".join(spec.description.split()))
+        store = CampaignStore.for_spec(spec, args.results_dir)
+        if store.source_conflict(spec):
+            # its name's folder holds another file's results: their counts are not its own
+            progress = f"{len(spec.runs):4d} runs (its folder {store.root} holds another campaign file's results)"
+        else:
+            st = store.status(spec)
+            progress = f"{st.total:4d} runs {len(st.done):4d} done {len(st.failed):3d} failed"
+        line = f"{path.stem:{width}s} {progress}  " + " ".join(spec.description.split())
         print(line if columns is None or len(line) <= columns else line[:columns - 3] + "...")
     return 0
 
