@@ -93,19 +93,18 @@ class StopRequest:
         return self.signum is not None
 
     def __call__(self, signum, frame):
-        if self.signum is not None and _PATIENT:
-            return                         # it stops after the step in progress anyway
-        if self.signum is not None:        # the second signal: at once
-            self.signum = signum
-            self.deliver()
+        if self.signum is not None:        # a second signal: at once, unless patient
+            if not _PATIENT:
+                self.signum = signum
+                self.deliver()
             return
         self.signum = signum
         if _PATIENT:                       # a campaign's worker: its campaign sent the signal
             print(f"tfm: stopping after the step in progress, to save the run's state in {self.path}",
                   file=sys.stderr, flush=True)
-            return
-        print(f"tfm: {signal.Signals(signum).name}: stopping after the step in progress, to save the "
-              f"run's state in {self.path} (a second signal stops at once)", file=sys.stderr, flush=True)
+        else:
+            print(f"tfm: {signal.Signals(signum).name}: stopping after the step in progress, to save the "
+                  f"run's state in {self.path} (a second signal stops at once)", file=sys.stderr, flush=True)
 
     @contextlib.contextmanager
     def installed(self):
