@@ -157,11 +157,7 @@ class Checkpoint:
     # ---- reading -------------------------------------------------------------
     def saved_run_id(self) -> str | None:
         """The run id the file here was saved for (None: no file, or not a readable checkpoint)."""
-        try:
-            with open(self.path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
-                return json.loads(str(z["meta"])).get("run_id")
-        except UNREADABLE + (AttributeError,):
-            return None
+        return (read_meta(self.path) or {}).get("run_id")
 
     def foreign(self) -> str | None:
         """What the file here holds if it is not this run's saved state (another run's, or
@@ -258,7 +254,7 @@ def read_meta(path: str | os.PathLike) -> dict | None:
             meta = json.loads(str(z["meta"]))
         meta.pop("carried", None)
         return meta
-    except UNREADABLE:
+    except UNREADABLE + (AttributeError,):      # AttributeError: metadata that is not a mapping
         return None
 
 
