@@ -1013,3 +1013,26 @@ def test_one_flipped_bit_in_a_run_file_is_found(tmp_path, capsys):
     store.table_path("summary").unlink()                             # the tables are rebuilt
     assert tfm_main(["campaign", "run", str(toml), "--results-dir", str(tmp_path), "-q"]) == 2
     assert f"{path}: the stored run {spec.runs[0].run_id} cannot be read" in capsys.readouterr().err
+
+
+def test_runs_removed_from_the_file_are_reported_not_dropped_silently(tmp_path, capsys):
+    """A value taken out of an edited campaign file: its stored run vanished from status and
+    the tables without a word, and the file on disk was the only trace (a user's hunt)."""
+    spec = _tiny("edited")
+    toml = _toml_of(spec, tmp_path)
+    args = ["--results-dir", str(tmp_path)]
+    assert tfm_main(["campaign", "run", str(toml), "-q", *args]) == 0
+    toml.write_text(toml.read_text().replace("alpha = [0.5, 0.75]", "alpha = [0.5]"))
+    capsys.readouterr()
+    assert tfm_main(["campaign", "run", str(toml), *args]) == 0
+    err = capsys.readouterr().err
+    assert "1 stored run in" in err and "is not in the campaign file now" in err
+    store = CampaignStore.for_spec(load_spec(toml), tmp_path)
+    assert len(store.load("summary")) == 1                    # the tables follow the file
+    assert len(list(store.runs_dir.glob("*.parquet"))) == 2   # and the removed run is kept
+    assert tfm_main(["campaign", "status", str(toml), *args]) == 0
+    assert "1 stored run in" in capsys.readouterr().out
+    toml.write_text(toml.read_text().replace("alpha = [0.5]", "alpha = [0.5, 0.75]"))
+    assert tfm_main(["campaign", "status", str(toml), *args]) == 0
+    out = capsys.readouterr().out
+    assert "2 done" in out and "not in the campaign file" not in out

@@ -121,6 +121,9 @@ def cmd_status(args) -> int:
           f"{len(st.pending)} pending, {len(st.failed)} failed"
           + (f", {len(st.stale)} computed by other tfm code (--rerun-stale)" if st.stale else "")
           + f"  [{store.root}]")
+    extra = store.extra_note(st)
+    if extra:
+        print(f"  {extra}")
     holder = store.running()
     if holder:
         print(f"  {holder} is running this campaign now: the tables are rebuilt when it finishes")

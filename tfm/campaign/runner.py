@@ -161,6 +161,9 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
                 print(f"warning: campaign {spec.name}: {len(status.stale)} stored runs were computed "
                       "by other tfm source code (prov_code_hash, a hash of its files; see prov_git_commit); "
                       "they are kept. Use --rerun-stale to recompute them.", file=sys.stderr)
+        extra = store.extra_note(status)
+        if extra and not quiet:
+            print(f"campaign {spec.name}: {extra}", file=sys.stderr)
         if only is not None:                 # run ids, or the Run records select_runs returns
             redo &= {getattr(r, "run_id", r) for r in only}
         todo = [run for run in spec.runs if run.run_id in redo]

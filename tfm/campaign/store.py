@@ -54,6 +54,9 @@ class Status:
     pending: list[str]
     flagged: list[str]          # done, but the run raised a warning flag
     stale: list[str] = dataclasses.field(default_factory=list)  # done by other tfm code
+    # stored runs and failures of run ids the file no longer expands to (values removed
+    # from it): kept on disk, left out of the tables
+    extra: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def total(self) -> int:
@@ -263,7 +266,24 @@ class CampaignStore:
                 failed.append(rid)
             else:
                 pending.append(rid)
-        return Status(done, failed, pending, flagged, stale)
+        return Status(done, failed, pending, flagged, stale, self._not_in(spec))
+
+    def _not_in(self, spec: CampaignSpec) -> list[str]:
+        """Run ids stored here (run files, failure records) that ``spec`` does not expand to."""
+        ids = {r.run_id for r in spec.runs}
+        found = {p.stem for d, pat in ((self.runs_dir, "*.parquet"), (self.failures_dir, "*.json"))
+                 if d.is_dir() for p in d.glob(pat) if not p.name.startswith(".")}
+        return sorted(found - ids)
+
+    def extra_note(self, status: Status) -> str | None:
+        """What to say about stored runs the campaign file no longer has, if any."""
+        if not status.extra:
+            return None
+        n = len(status.extra)
+        return (f"{n} stored run{'s' if n > 1 else ''} in {self.root} {'are' if n > 1 else 'is'} not in the "
+                f"campaign file now (values removed from it?): kept on disk in {self.runs_dir.name}/ or "
+                f"{self.failures_dir.name}/, left out of the tables; put the values back to have them in the "
+                "tables again")
 
     # ---- campaign tables ---------------------------------------------------
     def write_tables(self, spec: CampaignSpec, status: Status | None = None) -> bool:
