@@ -684,6 +684,20 @@ def test_another_file_with_the_same_name_is_refused(tmp_path, capsys):
     assert tfm_main(["campaign", "status", str(second), "--results-dir", res]) == 0
     assert "2 done" in capsys.readouterr().out
 
+    # the file moved and then edited cannot be told from another campaign; the message
+    # says how it takes over the results, and that way works
+    moved = tmp_path / "b" / "moved" / "dup.toml"
+    moved.parent.mkdir()
+    first.rename(moved)
+    moved.write_text(moved.read_text().replace("[0.5, 0.6]", "[0.5, 0.6, 0.7]"))
+    assert tfm_main(["campaign", "status", str(moved), "--results-dir", res]) == 2
+    err = capsys.readouterr().err
+    json_path = tmp_path / "res" / "dup" / "campaign.json"
+    assert f"moved and edited, delete {json_path} and it takes over these results" in err
+    json_path.unlink()
+    assert tfm_main(["campaign", "status", str(moved), "--results-dir", res]) == 0
+    assert "3 runs: 2 done" in capsys.readouterr().out
+
 
 # ---- a pool that survives a dead worker ------------------------------------------------------
 def test_a_killed_worker_fails_only_its_own_run(tmp_path):

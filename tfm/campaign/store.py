@@ -179,7 +179,9 @@ class CampaignStore:
             return None
         return (f"{self.root} holds the results of campaign {rec.get('source')!r} "
                 f"(sha256 {str(rec.get('sha256'))[:12]}...), and {spec.source!r} is another campaign with "
-                f"the same name {spec.name!r}. Give it its own name, or another --results-dir")
+                f"the same name {spec.name!r}. Give it its own name, or another --results-dir. If it is that "
+                f"file, moved and edited, delete {self.root / 'campaign.json'} and it takes over these "
+                "results (runs with the same parameters are reused)")
 
     def claim(self, spec: CampaignSpec) -> None:
         """Record which campaign file writes here (call with the lock held)."""
