@@ -631,3 +631,36 @@ def test_provenance_leaves_the_users_git_index_alone(tmp_path):
     os.utime(tmp_path / "a.txt", (1e9, 1e9))          # same content, other stat: the index is stale
     assert git_commit(tmp_path).endswith("-dirty") is False
     assert index.read_bytes() == before
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_a_run_removes_what_a_killed_run_of_the_same_outputs_left(tmp_path):
+    """kill -9 during a write left the temporary files of the table, the checkpoint and the
+    figure beside the outputs for good; the next run of those outputs removes the files of
+    pids that no longer run, and nothing else."""
+    dead, alive = _dead_pid(), os.getppid()      # not ours: this process writes through its own
+    left = [f".c.parquet.{dead}.tmp", f".c.checkpoint.npz.{dead}.tmp", f".c.{dead}.tmp.png",
+            f".c.{dead}.worker.png", f".c.fields.nc.{dead}.tmp"]
+    kept = [f".c.parquet.{alive}.tmp", ".c.parquet.backup", f".d.parquet.{dead}.tmp", f".c.parquet.{dead}.tmp.x"]
+    for name in left + kept:
+        (tmp_path / name).write_text("x")
+    assert main(["run", *SMALL, "-o", str(tmp_path / "c.parquet"), "-q"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(kept + ["c.parquet", "c.png"])
+
+
+def test_temporary_snapshot_files_of_dead_processes_are_removed(tmp_path):
+    from tfm.snapshots import remove_dead_temporary_fields
+
+    dead, alive = _dead_pid(), os.getpid()
+    left = [f"tfm-{dead}-abc.fields.nc", f".tfm-{dead}-abc.fields.nc.{dead}.tmp"]
+    kept = [f"tfm-{alive}-abc.fields.nc", "tfm-abc.fields.nc", f"tfm-{dead}-abc.fields.nc.bak"]
+    for name in left + kept:
+        (tmp_path / name).write_text("x")
+    assert remove_dead_temporary_fields(tmp_path) == []          # younger than an hour: kept
+    assert sorted(p.name for p in remove_dead_temporary_fields(tmp_path, min_age=0)) == sorted(left)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(kept)

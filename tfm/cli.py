@@ -278,6 +278,9 @@ def cmd_run(args) -> int:
     out, plot_path = _plan_outputs(args, p)
     ckpt = _checkpoint_options(args, p, out)
     args.checkpoint_path = ckpt.get("checkpoint")     # for the message if it is interrupted
+    from .results import fields_path_for, remove_dead_temporaries
+    remove_dead_temporaries(out, fields_path_for(out), checkpoint_path_for(out),
+                            *([plot_path] if plot_path is not None else []))
     # the figure's worker imports and warms up while this process loads the engine and runs
     worker = start_worker(p) if plot_path is not None else None
     try:

@@ -175,6 +175,45 @@ def fields_path_for(curve_path: str | os.PathLike) -> Path:
     return curve_path.with_name(curve_path.stem + ".fields.nc")
 
 
+def _gone(pid: int) -> bool:
+    """Whether no process ``pid`` runs on this machine (one that is not ours counts as running)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except OSError:
+        return False
+    return False
+
+
+def remove_dead_temporaries(*outputs: str | os.PathLike) -> list[Path]:
+    """Remove what a killed tfm process (kill -9, a crash) left beside the outputs: the
+    temporary files it wrote them through, named after the output and its pid
+    (``.<name>.<pid>.tmp``, ``.<stem>.<pid>.tmp<suffix>``, ``.<stem>.<pid>.worker<suffix>``),
+    whose pid no longer runs here. Other files are never touched."""
+    import re
+
+    removed = []
+    for out in outputs:
+        out = Path(out)
+        stem, suffix = re.escape(out.stem), re.escape(out.suffix)
+        pattern = re.compile(rf"\.(?:{re.escape(out.name)}\.(\d+)\.(?:probe\.)?tmp"
+                             rf"|{stem}\.(\d+)\.(?:tmp|worker){suffix})")
+        try:
+            candidates = list(out.parent.glob(f".{out.stem}.*"))
+        except OSError:
+            continue
+        for path in candidates:
+            match = pattern.fullmatch(path.name)
+            if match and _gone(int(match.group(1) or match.group(2))):
+                try:
+                    path.unlink()
+                    removed.append(path)
+                except OSError:
+                    pass
+    return removed
+
+
 #: integer columns of the curve; the others are floats, and "phase" ("load", "unload")
 INT_COLUMNS = ("step", "n_contact", "n_snapped", "n_entered", "rounds", "solver_iters")
 

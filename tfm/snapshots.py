@@ -50,9 +50,44 @@ CF_UNITS = {"paper": ("L*", "F*", "L*^2"), "si": ("m", "N", "m^2")}
 
 
 def temporary_fields_path() -> Path:
-    fd, name = tempfile.mkstemp(prefix="tfm-", suffix=".fields.nc")
+    """A new file in the temporary folder for a run's snapshots (moved beside its table
+    when that is written), named with this process's pid so that the files of a killed
+    process can be told from a running one's (remove_dead_temporary_fields)."""
+    remove_dead_temporary_fields()
+    fd, name = tempfile.mkstemp(prefix=f"tfm-{os.getpid()}-", suffix=".fields.nc")
     os.close(fd)
     return Path(name)
+
+
+def remove_dead_temporary_fields(folder: str | os.PathLike | None = None,
+                                 min_age: float = 3600.0) -> list[Path]:
+    """Remove the temporary snapshot files (and their ``.tmp`` being written) that a killed
+    process left in the temporary folder: ours, from a pid that no longer runs here, and
+    untouched for ``min_age`` seconds (a process of another pid namespace sharing the
+    folder would be writing to its file)."""
+    import re
+    import time
+
+    from .results import _gone
+
+    folder = Path(folder or tempfile.gettempdir())
+    pattern = re.compile(r"\.?tfm-(\d+)-[^/]*\.fields\.nc(?:\.\d+\.tmp)?")
+    removed = []
+    try:
+        candidates = list(folder.glob("tfm-*.fields.nc")) + list(folder.glob(".tfm-*.fields.nc.*.tmp"))
+    except OSError:
+        return removed
+    for path in candidates:
+        match = pattern.fullmatch(path.name)
+        try:
+            st = path.stat()
+            if (match and st.st_uid == os.getuid() and time.time() - st.st_mtime >= min_age
+                    and _gone(int(match.group(1)))):
+                path.unlink()
+                removed.append(path)
+        except OSError:
+            pass
+    return removed
 
 
 class _Copy:
