@@ -39,10 +39,15 @@ def main(argv: list[str]) -> None:
             s = pull_off(spacing="1/32", step=0.05 / n)
             print(f"loading steps {n} pull_off {s['pull_off_force']:.6g}", flush=True)
     elif what == "tol":
-        for tol in [1e-2, 3e-3, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 1e-10]:
-            for sp in ["1/32", "1/64"]:
-                s = pull_off(spacing=sp, tol=tol, step=1e-3)
-                print(f"tol {tol:g} spacing {sp} pull_off {s['pull_off_force']:.8g}", flush=True)
+        # a flipped snap decision shifts the pull-off by a step, at some spacings and steps
+        # only: sweep both, against tol 1e-10
+        for sp in ["1/32", "1/64", "1/128", "1/256"]:
+            for step in [2.5e-4, 1e-3]:
+                ref = pull_off(spacing=sp, step=step)["pull_off_force"]
+                for tol in [1e-2, 1e-3, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6]:
+                    f = pull_off(spacing=sp, tol=tol, step=step)["pull_off_force"]
+                    print(f"spacing {sp} step {step:g} tol {tol:g} pull_off {f:.8g} "
+                          f"relative to tol 1e-10 {(f - ref) / ref:+.2e}", flush=True)
     elif what == "memory":
         extent = float(argv[1])
         operator = argv[2] if len(argv) > 2 else "fft"

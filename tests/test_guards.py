@@ -85,8 +85,10 @@ def test_the_applicability_table_names_real_fields():
      r"step: only 1.64 loading steps to the automatic preload depth 0.0821"),
     # 9.9999 steps read "only 10 loading steps ... below 10"
     (dict(OK, step=0.0500005 / 10), "step", r"step: only 9.9999 loading steps"),
-    (dict(OK, tol=1e-2), "tol", r"tol: 0.01 is looser than 0.0001"),
+    (dict(OK, tol=1e-2), "tol", r"tol: 0.01 is looser than 1e-06"),
     (dict(OK, tol=1e-3), "tol", r"tol: 0.001 is looser"),
+    # 1e-4 passed, and moved the pull-off by a whole step (+0.95 % at 1/64, a user's check)
+    (dict(OK, tol=1e-4), "tol", r"tol: 0.0001 is looser than 1e-06"),
 ])
 def test_a_meaningless_run_is_refused_and_can_be_allowed(kw, guard, match):
     p = Params.from_dict(kw)

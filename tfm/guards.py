@@ -21,8 +21,12 @@ alpha = 0.75, max_indent = 0.05; reference 3.19e-3 at spacing 1/256):
   bisection (jump-off at spacing 1/32 and 1/64: within 5e-5 and 3e-4 relative from 3 to
   400 load steps, 2026-11-24).
 - ``tol``: the CG tolerance. Snap and entry decisions compare forces and gaps with the
-  threshold, so a loose solve flips them: at spacing 1/64 tol 1e-2 moved the pull-off
-  by -16.5 %, 3e-3 by +3.6 %, 1e-3 by +2.9 %, 1e-4 by 1.5e-6 (relative) against 1e-10.
+  threshold, so a loose solve flips them, and a flipped decision moves the pull-off by a
+  whole step: against tol 1e-10 on the standard curve (step 2.5e-4), tol 1e-4 moved it by
+  +0.95 % at 1/64, +0.50 % at 1/128 and +0.56 % at 1/256; 3e-5 by +0.56 % at 1/256; 1e-5 by
+  at most 7.7e-7 and 1e-6 by at most 6.8e-8 from 1/32 to 1/256 (also with step 1e-3;
+  ``python -m bench.guards tol``, 2026-11-25). Earlier, with step 1e-3 at 1/64 only, 1e-4
+  had looked safe (3e-6), and 1e-4 was the limit until then.
 - ``memory``: the estimate below against the memory the machine has available now.
 """
 from __future__ import annotations
@@ -34,13 +38,13 @@ from .params import ParameterError, Params
 
 MIN_SPRINGS_ACROSS_RADIUS = 2.0
 MIN_LOADING_STEPS = 10
-MAX_TOL = 1e-4
+MAX_TOL = 1e-6
 
 # guard name -> the parameter it names and what it protects (``allow`` takes the names)
 GUARDS = {
     "coarse": "spacing: fewer than 2 springs across the contact radius at maximum load",
     "step": "step: fewer than 10 loading steps (step > max_indent / 10)",
-    "tol": "tol: looser than 1e-4, so snap and entry decisions depend on the solver error",
+    "tol": "tol: looser than 1e-6, so snap and entry decisions depend on the solver error",
     "memory": "spacing/extent: the estimated peak memory exceeds the memory available",
 }
 
@@ -226,7 +230,8 @@ def check(p, memory: bool = True) -> list[str]:
                         f"{depth / MIN_LOADING_STEPS:.3g}" + (", or give max_indent" if auto else ""))
     if p.tol > MAX_TOL and "tol" not in allowed:
         _refuse("tol", f"tol: {p.tol:g} is looser than {MAX_TOL:g}; snap and entry decisions then "
-                       "follow the solver error (tol 1e-2 moved the pull-off by 16 %, 1e-3 by 3 %)")
+                       "follow the solver error and can move the pull-off by a whole step (tol 1e-4: +0.95 % at "
+                       "spacing 1/64; 3e-5: +0.56 % at 1/256; 1e-2: -27 %)")
     if memory:
         need, have = estimate_memory(p), available_memory()
         if have is not None and need > have and "memory" not in allowed:
