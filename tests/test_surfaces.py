@@ -440,3 +440,93 @@ def test_surface_topography_file_in_si_units(tmp_path):
     # springs sit that close to the pixels and the heights match to about that
     expect = arr[0:39, 0:39].ravel() * 1e-6
     np.testing.assert_allclose(x0, expect - expect.max(), rtol=0, atol=1e-12)
+
+
+def _topography(tmp_path, name, heights, size, unit):
+    st = pytest.importorskip("SurfaceTopography")
+    path = str(tmp_path / name)
+    st.Topography(heights, size, unit=unit).to_netcdf(path)
+    return path
+
+
+SI_MAP = dict(units="si", youngs_modulus=1e6, poisson_ratio=0.5, f_th=0.0, shape="height_map")
+
+
+def test_missing_pixels_of_a_topography_are_refused_not_read_as_heights(tmp_path):
+    """A masked pixel came in as its fill value, 1e20 um: one pillar, a run with exit 3
+    and a warning about the spacing (a user's hunt)."""
+    arr = np.random.default_rng(3).normal(size=(33, 33))
+    arr[4, 5] = np.nan
+    path = _topography(tmp_path, "masked.nc", np.ma.masked_invalid(arr), (33.0, 33.0), "um")
+    with pytest.raises(ParameterError, match=r"height_map: 1 heights are NaN .*pixel \[4, 5\]"):
+        Params(**SI_MAP, height_map=path, spacing=1e-6, max_indent=1e-6, step=1e-7)
+
+
+@pytest.mark.parametrize("unit, metres", [("A", 1e-10), ("km", 1e3), ("fm", 1e-15)])
+def test_every_length_unit_of_surface_topography_is_read(tmp_path, unit, metres):
+    """Files in Å (SurfaceTopography writes "A" as "Å") or km stopped the run with a
+    traceback."""
+    arr = np.random.default_rng(4).normal(size=(20, 20))
+    path = _topography(tmp_path, f"u_{unit}.nc", arr, (20.0, 20.0), unit)
+    p = Params(**SI_MAP, height_map=path, spacing=metres, max_indent=metres / 10, step=metres / 100)
+    x0 = heights(p, make_layout(p))
+    expect = arr[0:19, 0:19].ravel() * metres
+    np.testing.assert_allclose(x0, expect - expect.max(), rtol=0, atol=1e-6 * metres)   # sizes in float32
+
+
+def test_an_unknown_unit_is_refused_when_the_record_is_made(tmp_path, monkeypatch):
+    from tfm import surfaces
+
+    path = _topography(tmp_path, "v.nc", np.zeros((8, 8)), (8.0, 8.0), "pm")
+    monkeypatch.delitem(surfaces._SI_UNITS, "pm")        # as a unit tfm would not know
+    with pytest.raises(ParameterError, match="height_map: unknown length unit 'pm'"):
+        Params(**SI_MAP, height_map=path, spacing=1e-6, max_indent=1e-7, step=1e-8)
+
+
+def test_a_pixel_size_over_a_files_own_is_refused(tmp_path):
+    """In paper units a nm file's heights became 1e-9 L* while map_pixel_size set its pixel
+    to 1/32 L*: a flat body, every spring in contact, exit 0 (a user's hunt)."""
+    arr = np.random.default_rng(5).normal(size=(65, 65)) * 5
+    path = _topography(tmp_path, "nm.nc", arr, (650.0, 650.0), "nm")
+    with pytest.raises(ParameterError, match="map_pixel_size: .* gives its own pixel size, 10 nm = 1e-08 m"):
+        Params(f_th=0.0, shape="height_map", height_map=path, spacing=1 / 32, map_pixel_size=1 / 32,
+               max_indent=0.01, step=1e-3)
+    # without it, the message says how the file's pixel was taken
+    with pytest.raises(ParameterError, match=r"the file's 10 nm taken in metres \(L\* = 1 m in paper units\)"):
+        Params(f_th=0.0, shape="height_map", height_map=path, spacing=1 / 32, max_indent=0.01, step=1e-3)
+    # the file's own value given again is accepted and gives the same heights
+    p = Params(**SI_MAP, height_map=path, spacing=1e-8, map_pixel_size=1e-8, max_indent=1e-8, step=1e-9)
+    q = Params(**SI_MAP, height_map=path, spacing=1e-8, max_indent=1e-8, step=1e-9)
+    np.testing.assert_allclose(heights(p, make_layout(p)), heights(q, make_layout(q)), rtol=0, atol=1e-15)
+
+
+def test_a_map_too_small_for_one_spring_is_the_maps_fault(tmp_path):
+    """It said "spacing: must be <= the grid half-width (0)"."""
+    np.save(tmp_path / "thin.npy", np.zeros((2, 65)))
+    with pytest.raises(ParameterError, match=r"height_map: the map \(2 x 65 pixels of 0.03125\) covers \+-0"):
+        Params(shape="height_map", height_map=str(tmp_path / "thin.npy"), map_pixel_size=1 / 32,
+               spacing=1 / 32, f_th=0.0, max_indent=0.01, step=1e-3)
+
+
+def test_cutoffs_with_no_wavevector_between_them_are_refused_early():
+    """They passed validation and the run stopped with a traceback from the synthesis."""
+    p = dict(shape="flat_punch", radius=0.5, f_th=0.0, spacing="1/32", extent=1.0, max_indent=0.01,
+             step=1e-3, rms_height=0.01, short_cutoff=0.95, long_cutoff=1.0)
+    with pytest.raises(ParameterError, match="short_cutoff / long_cutoff: no wavevector of the grid"):
+        Params.from_dict({**p, "rolloff": 0.0})
+    Params.from_dict({**p, "rolloff": 1.0})          # power below the long cutoff: a surface
+
+
+def test_has_modes_is_the_synthesis_mask():
+    """The validation's count of modes, without the n x n array, against the PSD's mask."""
+    from tfm.surfaces import has_modes, self_affine_psd, wavevectors
+
+    rng = np.random.default_rng(1)
+    for _ in range(500):
+        n = int(rng.integers(3, 40))
+        sp = 1.0 / n
+        short = float(rng.uniform(2 * sp, 1.2))
+        long_ = float(rng.uniform(short, 1.3)) if rng.random() < 0.8 else None
+        rolloff = 0.0 if rng.random() < 0.7 else 1.0
+        mask = self_affine_psd(wavevectors(n, sp), 0.8, short, long_, rolloff) > 0
+        assert mask.any() == has_modes(n, sp, short, long_, rolloff), (n, short, long_, rolloff)

@@ -613,6 +613,7 @@ def _validate(p: Params) -> None:
         raise ParameterError(f"step: {depth} / step = {dmax / p.step:.3g} steps; must be <= {MAX_STEPS:g}")
     if p.shape == "sphere" and dmax >= p.radius:
         raise ParameterError(f"max_indent: must be < radius ({p.radius:g}) for a sphere, got {dmax!r}")
+    _check_map_covers(p)
     hw = p.half_width
     if p.spacing > hw:
         raise ParameterError(f"spacing: must be <= the grid half-width ({hw:g}); got {p.spacing!r}")
@@ -743,11 +744,24 @@ def _validate_surface(p: Params) -> None:
             _positive("map_pixel_size", p.map_pixel_size)
         if p.max_indent == "auto":
             raise ParameterError("max_indent: 'auto' needs a sphere's JKR radius; give a number for a height map")
-        from .surfaces import MapError, load_height_map
+        from .surfaces import MapError, load_height_map, unit_to_metres
         try:
             hm = load_height_map(p.height_map)
+            to_m = unit_to_metres(hm.unit, p)
         except MapError as exc:
             raise ParameterError(str(exc)) from None
+        if p.map_pixel_size is not None and hm.pixel_size is not None:
+            # the file's heights are taken in metres (its unit); a pixel given in other
+            # terms would scale one and not the other. The file's own value given again is
+            # fine (files store their sizes in single precision: 1e-6)
+            own = hm.pixel_size * to_m
+            if not math.isclose(p.map_pixel_size, own, rel_tol=1e-6):
+                raise ParameterError(
+                    f"map_pixel_size: {p.height_map} gives its own pixel size, {hm.pixel_size:g} {hm.unit or ''} "
+                    f"= {own:g} m, and its heights in {hm.unit or 'm'}, both taken in metres"
+                    f"{' (L* = 1 m in paper units)' if p.units == 'paper' else ''}; map_pixel_size applies "
+                    f"to maps without one (.npy), got {p.map_pixel_size!r}. To rescale the map, save its "
+                    "heights as .npy and give map_pixel_size")
         if p.height_map_hash is None:
             object.__setattr__(p, "height_map_hash", hm.sha256)
         elif p.height_map_hash != hm.sha256:
@@ -776,8 +790,20 @@ def _validate_surface_relations(p: Params) -> None:
         if p.long_cutoff > side * (1 + 1e-12):
             raise ParameterError(f"long_cutoff: must be <= the grid side ({side:g}); no wavevector of the "
                                  f"grid lies below a longer cutoff, got {p.long_cutoff!r}")
+    if _rough(p):
+        from .surfaces import default_short_cutoff, grid_side, has_modes
+        short = p.short_cutoff if p.short_cutoff is not None else default_short_cutoff(p.spacing)
+        if not has_modes(grid_side(p), p.spacing, short, p.long_cutoff, p.rolloff):
+            raise ParameterError(f"short_cutoff / long_cutoff: no wavevector of the grid (side {side:g}) lies "
+                                 f"between the cutoffs {short:g} and {p.long_cutoff:g} with rolloff = 0, so the "
+                                 "surface would have no roughness; widen the band or give rolloff > 0")
+
+def _check_map_covers(p: Params) -> None:
+    """A height map covers the grid (before the spacing is checked against the grid: a
+    map too small for one spring a side is the map's fault, not the spacing's)."""
     if p.shape == "height_map":
         from .surfaces import load_height_map, map_half_width, map_pixel
+        hw = p.half_width
         hm = load_height_map(p.height_map)
         avail = map_half_width(p, hm)
         # how far the layout's springs reach (tfm.geometry): hexagonal rows go to
@@ -790,9 +816,12 @@ def _validate_surface_relations(p: Params) -> None:
             need += p.jitter * p.spacing
         if avail <= 0 or need > avail * (1 + 1e-9):
             nx, ny = hm.heights.shape
-            raise ParameterError(f"height_map: the map ({nx} x {ny} pixels of {map_pixel(p, hm):g}) covers "
-                                 f"+-{avail:g}, smaller than the grid (half-width {need:g}); "
-                                 "use a larger map or a smaller extent")
+            own = (f", the file's {hm.pixel_size:g} {hm.unit or ''} taken in metres"
+                   + (" (L* = 1 m in paper units)" if p.units == "paper" else "")
+                   if hm.pixel_size is not None and p.map_pixel_size is None else "")
+            raise ParameterError(f"height_map: the map ({nx} x {ny} pixels of {map_pixel(p, hm):g}{own}) covers "
+                                 f"+-{avail:g}, smaller than the grid (half-width {max(need, p.spacing):g}); "
+                                 "use a larger map, a smaller extent or a finer spacing")
 
 
 def _validate_units(p: Params) -> None:

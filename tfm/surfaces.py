@@ -93,6 +93,24 @@ def self_affine_psd(q, hurst: float, short_cutoff: float, long_cutoff: float | N
     return psd
 
 
+def has_modes(n: int, spacing: float, short_cutoff: float, long_cutoff: float | None,
+              rolloff: float = 1.0) -> bool:
+    """Whether some wavevector of the n x n grid carries power under self_affine_psd (the
+    same test as its mask, on integer frequency pairs: no n x n array)."""
+    scale = n * spacing                      # |q| = 2 pi k / scale, k = |(i, j)|, |i|, |j| <= n // 2
+    k_hi = scale / short_cutoff
+    k_lo = scale / long_cutoff if long_cutoff is not None and rolloff == 0 else 0.0
+    half = n // 2
+    for i in range(0, half + 1):
+        # the smallest j >= 0 with i^2 + j^2 >= k_lo^2 and (i, j) != (0, 0)
+        j = max(math.ceil(math.sqrt(max(k_lo * k_lo - i * i, 0.0))), 1 if i == 0 else 0)
+        while j <= half and i * i + j * j < k_lo * k_lo:
+            j += 1
+        if j <= half and math.sqrt(i * i + j * j) <= k_hi * (1 + 1e-12):
+            return True
+    return False
+
+
 def fourier_synthesis(n: int, spacing: float, hurst: float, *, rms_height: float = 0.0,
                       rms_slope: float = 0.0, short_cutoff: float | None = None,
                       long_cutoff: float | None = None, rolloff: float = 1.0,
@@ -320,7 +338,11 @@ def _read_with_surface_topography(file: Path):
     nx, ny = topo.nb_grid_pts
     if not math.isclose(sx / nx, sy / ny, rel_tol=1e-9):
         raise MapError(f"height_map: pixels must be square, got {sx / nx:g} x {sy / ny:g}")
-    return np.asarray(topo.heights()), sx / nx, getattr(topo, "unit", None)
+    heights = topo.heights()
+    if np.ma.isMaskedArray(heights):
+        # missing data: the mask's fill value (1e20) would be read as a height
+        heights = np.ma.filled(heights.astype(np.float64), np.nan)
+    return np.asarray(heights), sx / nx, getattr(topo, "unit", None)
 
 
 def map_pixel(p, hm: HeightMap) -> float:
@@ -337,7 +359,9 @@ def heights_in_run_units(p, hm: HeightMap) -> np.ndarray:
     return hm.heights * unit_to_metres(hm.unit, p) if hm.pixel_size is not None else hm.heights
 
 
-_SI_UNITS = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "nm": 1e-9, "pm": 1e-12, "A": 1e-10}
+# SurfaceTopography's length units (it writes and reads "A" as "Å")
+_SI_UNITS = {"Gm": 1e9, "Mm": 1e6, "km": 1e3, "m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "nm": 1e-9,
+             "Å": 1e-10, "A": 1e-10, "pm": 1e-12, "fm": 1e-15}
 
 
 def unit_to_metres(unit: str | None, p) -> float:
