@@ -217,3 +217,31 @@ def test_values_that_change_nothing_without_adhesion_are_warned_about(kw, names)
     said = [str(w.message) for w in caught]
     for name in names:
         assert f"{name}: given but has no effect here: every threshold is zero (no adhesion)" in said
+
+
+def test_a_threshold_override_clears_the_other_one_for_a_dict_as_for_a_record():
+    """simulate(dict with k_th, f_th=...) was refused with "give only one", while the
+    same call with a Params record replaced k_th (a user's hunt)."""
+    import tfm
+
+    from pathlib import Path
+
+    as_dict = dict(spacing="1/16", k_th=0.02, step=2e-3, max_indent=0.05, shape="paraboloid")
+    via_dict = tfm.simulate(as_dict, f_th=1e-5).params
+    assert via_dict == tfm.simulate(Params.from_dict(as_dict), f_th=1e-5).params
+    assert via_dict.k_th is None and via_dict.f_th == 1e-5
+    with pytest.raises(ParameterError, match="expected a tfm.Params or a dict of parameters, got PosixPath"):
+        tfm.simulate(Path("run.toml"))
+
+
+def test_submodules_are_attributes_after_a_bare_import():
+    """`import tfm; tfm.results.read_metadata(...)`, as the docs write it, raised
+    AttributeError in a fresh interpreter."""
+    import subprocess
+    import sys
+
+    code = ("import tfm; print(tfm.results.read_metadata.__name__, tfm.analysis.ensemble_stats.__name__, "
+            "tfm.theory.__name__, callable(tfm.simulate))\n"
+            "try:\n    tfm.no_such_thing\nexcept AttributeError as e:\n    print('AttributeError')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["read_metadata", "ensemble_stats", "tfm.theory", "True", "AttributeError"]

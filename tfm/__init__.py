@@ -1,6 +1,7 @@
 """tfm: the threshold-force model of adhesion and mode I fracture (Hulikal, Bhattacharya &
 Lapusta), as a Numba-parallel batch experiment engine."""
 import importlib
+import importlib.util
 import sys
 import types
 
@@ -15,6 +16,9 @@ def __getattr__(name):
     # the engine (NumPy, SciPy, Numba) loads on first use, so `tfm --help` stays fast
     if name in ("simulate", "RunWarning"):
         return getattr(importlib.import_module(".simulate", __name__), name)
+    # submodules as attributes after a bare `import tfm` (tfm.results.read_metadata, ...)
+    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'tfm' has no attribute {name!r}")
 
 

@@ -65,8 +65,13 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     if p is None:
         p = Params.from_dict(overrides) if overrides else Params()
     elif isinstance(p, Mapping):
-        p = Params.from_dict({**p, **overrides})
-    elif isinstance(p, (str, bytes, int, float, list, tuple)):
+        merged = {**p, **overrides}
+        # as Params.replace: a threshold given as an override clears the other one
+        for given, other in (("k_th", "f_th"), ("f_th", "k_th")):
+            if overrides.get(given) is not None and other not in overrides:
+                merged.pop(other, None)
+        p = Params.from_dict(merged)
+    elif not isinstance(p, Params):
         raise ParameterError(f"simulate: expected a tfm.Params or a dict of parameters, got {type(p).__name__}")
     elif overrides:
         p = p.replace(**overrides)
