@@ -79,6 +79,11 @@ def test_no_spring_in_contact_after_jump_off():
     ({"control": "force", "shape": "flat_punch"}, "max_load: control='force' on a flat punch"),
     ({"control": "force", "max_load": 0.01, "load_step": 0.1}, "load_step: must be <= max_load"),
     ({"control": "forse"}, "control: unknown value 'forse'"),
+    # a large or tiny max_load under displacement control was blamed on max_indent or
+    # step, parameters the user had not set: its depth sized the preload even there
+    ({"max_load": 1}, "max_load: 1.0 has no effect here; it applies only when control='force'"),
+    ({"k_th": 0.02, "shape": "paraboloid", "max_load": 1e-9}, "max_load: 1e-09 has no effect here"),
+    ({"control": "force", "max_load": 1}, "max_load: 1 would press a sphere of radius 1 in by 1.77"),
 ])
 def test_protocol_parameters_fail_early(values, message):
     with pytest.raises(ParameterError, match=message):

@@ -194,7 +194,8 @@ class Params:
             # no load_step: the preload does not depend on it, and the twin would check it
             # in paper units (this record checks it in newtons)
             return to_paper(self, load_step=None).delta_max
-        if self.max_indent == "auto" and getattr(self, "max_load", None) is not None:
+        if (self.max_indent == "auto" and getattr(self, "max_load", None) is not None
+                and self.control == "force"):        # elsewhere max_load is refused, not used
             from .theory import preload_indent
             return float(preload_indent(self.shape, self.max_load, self.radius))
         if self.max_indent == "auto":
@@ -612,6 +613,9 @@ def _validate(p: Params) -> None:
     if dmax / p.step > MAX_STEPS:
         raise ParameterError(f"step: {depth} / step = {dmax / p.step:.3g} steps; must be <= {MAX_STEPS:g}")
     if p.shape == "sphere" and dmax >= p.radius:
+        if p.control == "force" and p.max_load is not None:
+            raise ParameterError(f"max_load: {p.max_load:g} would press a sphere of radius {p.radius:g} in by "
+                                 f"{dmax:.3g} (its Hertz depth), deeper than its radius; lower max_load")
         raise ParameterError(f"max_indent: must be < radius ({p.radius:g}) for a sphere, got {dmax!r}")
     _check_map_covers(p)
     hw = p.half_width
