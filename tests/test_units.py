@@ -231,3 +231,15 @@ def test_every_dimensioned_column_has_a_unit():
         assert set(columns.values()) <= set(system)
     # under force control the jump-off values are measured (not nan), so they need the unit
     assert math.isfinite(res.summary["jump_off_force"]) and math.isfinite(res.summary["jump_off_indent"])
+
+
+def test_the_progress_callback_of_an_si_run_gets_newtons():
+    """It got the forces of the paper-units twin (-6.3e-11 where the table says -2.64e-4
+    N: a factor F*), undocumented (a user's hunt)."""
+    seen = []
+    p = Params.from_dict(dict(SI, spacing=R / 16, step=R * 1e-3, shape="paraboloid", max_indent=R * 0.02,
+                              allow="coarse"))
+    res = tfm.simulate(p, progress=seen.append)
+    np.testing.assert_array_equal([r.force for r in seen], res.curve["force"].to_numpy())
+    np.testing.assert_array_equal([r.d for r in seen], res.curve["d"].to_numpy())
+    np.testing.assert_array_equal([r.contact_area for r in seen], res.curve["contact_area"].to_numpy())

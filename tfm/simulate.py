@@ -1,6 +1,7 @@
 """One run: a parameter record in, a curve and a summary out."""
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
 from collections.abc import Mapping
@@ -14,7 +15,7 @@ from .params import ParameterError, Params
 from .results import RunResult, curve_columns, provenance, summarize
 from .solver import Problem
 from .threshold import threshold_forces
-from .units import to_paper, to_si_curve, to_si_summary, unit_labels
+from .units import force_scale, to_paper, to_si_curve, to_si_summary, unit_labels
 
 
 class RunWarning(UserWarning):
@@ -47,7 +48,9 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     """Run the loading protocol of ``p.control`` (tfm.protocol). ``simulate(spacing=1/64,
     k_th=0.02)`` and ``simulate(Params(...))`` both work. Suspect results carry flags and warn.
 
-    ``progress(record)`` is called after every step. With ``p.snapshots`` other than
+    ``progress(record)`` is called after every step with its tfm.solver.StepRecord (step,
+    phase, d, force, contact_area, n_contact, ...; the run's units: newtons and metres in
+    an SI run; force = -sum(F), compressive positive, as in the curve table). With ``p.snapshots`` other than
     "none" the field snapshots stream to ``fields_path`` (NetCDF4, tfm.snapshots); without
     a path they go to a temporary file that ``RunResult.write_curve`` moves beside the curve.
 
@@ -108,11 +111,15 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
         fields_path = fields_path or temporary_fields_path()
         writer = SnapshotWriter(fields_path, p, layout, prob)   # the run's record and units
 
+    # the step records are the paper-units twin's: an SI run's caller gets newtons (its
+    # lengths are metres already, L* = 1 m)
+    newtons = force_scale(p) if p.units == "si" else None
+
     def observe(state, rec):
         if writer is not None:
             writer.observe(state, rec)
         if progress is not None:
-            progress(rec)
+            progress(rec if newtons is None else dataclasses.replace(rec, force=rec.force * newtons))
 
     try:
         out = protocol.run(q, prob, observe, ckpt)
