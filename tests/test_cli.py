@@ -344,6 +344,14 @@ def test_a_parameter_that_does_not_apply_exits_2_or_warns(tmp_path, capsys):
         in capsys.readouterr().err
 
 
+def test_an_indefinite_kernel_is_refused_before_the_run_is_announced(tmp_path, capsys):
+    """The refusal came after the `tfm run <id>: ...` header, as if the run had started."""
+    loud = [a for a in SMALL if a != "-q"]
+    assert main(["run", *loud, "--kernel", "neighbors", "-o", str(tmp_path / "c.parquet")]) == 2
+    err = capsys.readouterr().err
+    assert "is not positive definite" in err and "tfm run " not in err and not list(tmp_path.iterdir())
+
+
 def test_guards_refuse_on_the_command_line_and_allow_overrides(tmp_path, capsys, monkeypatch):
     coarse = ["--spacing", "1/4", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.01",
               "--step", "1e-3", "-q", "--no-plot"]

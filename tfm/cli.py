@@ -275,6 +275,10 @@ def cmd_run(args) -> int:
 
     p = _params_from_args(args)
     notes = check(p)                      # refuses meaningless or oversized runs (exit 2)
+    from .guards import kernel_check_key
+    if kernel_check_key(p) is not None:   # a kernel that may be indefinite: before the header
+        from .operators import check_record
+        check_record(p)
     out, plot_path = _plan_outputs(args, p)
     ckpt = _checkpoint_options(args, p, out)
     args.checkpoint_path = ckpt.get("checkpoint")     # for the message if it is interrupted
