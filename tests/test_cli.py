@@ -577,6 +577,28 @@ def test_an_interruption_after_the_table_says_so_and_leaves_no_figure_behind(tmp
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.parquet"]
 
 
+def test_an_interruption_before_the_table_leaves_no_snapshots_that_block_the_rerun(tmp_path, monkeypatch,
+                                                                                   capsys):
+    """Ctrl-C after the run, before its table: the snapshots were in place with no table,
+    and the command the message gave was refused ("a.fields.nc exists")."""
+    from tfm.results import RunResult
+
+    real = RunResult.write_curve
+
+    def interrupted(self, path):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(RunResult, "write_curve", interrupted)
+    out = tmp_path / "a.parquet"
+    cmd = ["run", *SMALL, "--snapshots", "5", "--no-plot", "-o", str(out)]
+    assert main(cmd) == 130
+    assert "no table written" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setattr(RunResult, "write_curve", real)
+    assert main(cmd) == 0                                    # the same command, as the message says
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.fields.nc", "a.parquet"]
+
+
 def test_write_table_keeps_every_numpy_column_type():
     """Columns are written from their buffers without pandas (tfm.results.arrow_column);
     booleans (bits in Arrow), big-endian numbers and NumPy strings must survive too."""

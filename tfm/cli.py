@@ -241,17 +241,24 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
         warnings.simplefilter("always", CheckpointWarning)
         res = simulate(p, progress=progress, fields_path=fields_path_for(out) if p.snapshots != "none" else None,
                        **ckpt)
-    for w in caught:                      # a checkpoint set aside, say
-        print(f"tfm: warning: {w.message}", file=sys.stderr)
-    if res.provenance.get("resumed_at_step") and not args.quiet:
-        print(f"continued from the checkpoint {ckpt['checkpoint']} at step {res.provenance['resumed_at_step']} "
-              "(the steps before were computed by the run that was stopped)", file=sys.stderr)
-    out = _appeared(out, args, p.run_id)
-    if plot is not None:                  # a default figure follows a diverted table
-        plot = _appeared(out.with_suffix(".png") if args.plot is None else plot, args, p.run_id)
-    if worker is not None and plot is not None:
-        worker.send(res, plot)
-    res.write_curve(out)
+    try:
+        for w in caught:                      # a checkpoint set aside, say
+            print(f"tfm: warning: {w.message}", file=sys.stderr)
+        if res.provenance.get("resumed_at_step") and not args.quiet:
+            print(f"continued from the checkpoint {ckpt['checkpoint']} at step {res.provenance['resumed_at_step']} "
+                  "(the steps before were computed by the run that was stopped)", file=sys.stderr)
+        out = _appeared(out, args, p.run_id)
+        if plot is not None:                  # a default figure follows a diverted table
+            plot = _appeared(out.with_suffix(".png") if args.plot is None else plot, args, p.run_id)
+        if worker is not None and plot is not None:
+            worker.send(res, plot)
+        res.write_curve(out)
+    except BaseException:
+        # no table: the snapshots placed for it would only make the same command refuse
+        # to start again (the run has no checkpoint; its message says it starts afresh)
+        if res.fields_path is not None:
+            Path(res.fields_path).unlink(missing_ok=True)
+        raise
     args.written = out                    # for the message of an interruption from here on
     if ckpt:
         Path(ckpt["checkpoint"]).unlink(missing_ok=True)     # the table holds the run now
