@@ -64,6 +64,22 @@ def test_events_are_the_curve_extremes(every10):
     assert "pull_off" in fields.events[i]
 
 
+def test_no_pull_off_event_without_tension_and_no_last_contact_while_in_contact(tmp_path):
+    """A run with no adhesion had a "pull_off" snapshot (titled "pull-off", at P = 0), and a
+    run whose unloading stopped in contact had a "last_contact" one (a user's hunt)."""
+    plain = tfm.simulate(spacing=1 / 32, f_th=0.0, shape="paraboloid", max_indent=0.05, step=1e-3,
+                         snapshots="events", fields_path=tmp_path / "a.fields.nc")
+    fields = Fields(tmp_path / "a.fields.nc")
+    assert (plain.curve["force"] >= 0).all()                   # it never pulls
+    assert "pull_off_step" not in fields.attrs and "last_contact_step" in fields.attrs
+    with pytest.warns(tfm.RunWarning, match="unloading stopped at max_unload_steps"):
+        capped = tfm.simulate(spacing=1 / 32, max_unload_steps=5, snapshots="events",
+                              fields_path=tmp_path / "b.fields.nc", **STANDARD, step=1e-3)
+    fields = Fields(tmp_path / "b.fields.nc")
+    assert capped.curve["n_contact"].iloc[-1] > 0               # unloading stopped in contact
+    assert "last_contact_step" not in fields.attrs and "max_load_step" in fields.attrs
+
+
 def test_xarray_opens_the_file_in_one_line(every10):
     xr = pytest.importorskip("xarray")
     res, fields = every10

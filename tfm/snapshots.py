@@ -210,7 +210,10 @@ class SnapshotWriter:
             self._write(_plain(rec), state.F, state.u, st, "first_snap")
         if self._best_load is None or rec.force > self._best_load.rec["force"]:
             self._best_load = _Copy(rec, state.F, state.u, st)
-        if rec.n_contact > 0 and (self._best_pull is None or rec.force < self._best_pull.rec["force"]):
+        # the pull-off is the largest tension (force < 0), as in the summary: a run that
+        # never pulls has none
+        if rec.n_contact > 0 and rec.force < 0 and (self._best_pull is None
+                                                    or rec.force < self._best_pull.rec["force"]):
             self._best_pull = _Copy(rec, state.F, state.u, st)
         self._prev = _Copy(rec, state.F, state.u, st)
 
@@ -249,8 +252,8 @@ class SnapshotWriter:
             self._settle("max_load", self._best_load)
         if self._best_pull is not None:
             self._settle("pull_off", self._best_pull)
-        if "last_contact" not in self._events and self._prev is not None and self._prev.rec["n_contact"] > 0:
-            self._settle("last_contact", self._prev)
+        # last_contact is settled when contact is lost (observe): a run that ends with
+        # springs in contact (unloading capped) has none
         for event, step in self._events.items():
             self._f.attrs[f"{event}_step"] = step
         if summary is not None:
