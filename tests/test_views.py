@@ -2,6 +2,7 @@
 faults a reviewer would see (captions, references, the snap-off jump, overlapping ticks)."""
 import re
 import time
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -243,15 +244,70 @@ def test_animate_makes_a_gif_with_one_frame_per_unloading_snapshot(stored_run, t
     from tfm.snapshots import Fields
 
     out = tmp_path / "unload.gif"
-    t0 = time.perf_counter()
     assert main(["animate", str(stored_run), "-o", str(out)]) == 0
-    seconds = time.perf_counter() - t0
     curve = pd.read_parquet(stored_run)
     phase = dict(zip(curve["step"], curve["phase"]))
     steps = Fields(stored_run.with_name("curve.fields.nc")).steps
     expected = sum(phase[s] == "unload" for s in steps) + 1          # + the last loading step
     assert Image.open(out).n_frames == expected
-    assert seconds < 60
+
+
+def test_a_failed_animation_leaves_the_earlier_one_whole(stored_run, tmp_path, monkeypatch):
+    """A write that failed with --overwrite (an fps too low for a GIF, then) left the old
+    GIF truncated to 416 unreadable bytes."""
+    from PIL import Image
+
+    from tfm import viewcli
+
+    out = tmp_path / "keep.gif"
+    assert main(["animate", str(stored_run), "-o", str(out)]) == 0
+    before = out.read_bytes()
+
+    def broken(*a, **k):
+        Path(a[3]).write_bytes(b"GIF89a half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(viewcli, "_write_animation", broken)
+    with pytest.raises(OSError):
+        main(["animate", str(stored_run), "-o", str(out), "--overwrite"])
+    assert out.read_bytes() == before and Image.open(out).n_frames > 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.gif"]
+
+
+def test_animate_and_show_a_table_whose_record_does_not_rebuild(stored_run, tmp_path, capsys):
+    """A height map moved after its run: tfm animate wrote the GIF, then stopped with an
+    AttributeError on the missing record."""
+    import json
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    copy = tmp_path / "c.parquet"
+    table = pq.read_table(stored_run)
+    meta = dict(table.schema.metadata)
+    params = {**json.loads(meta[b"tfm.params"]), "spacing": -1}      # a record that cannot rebuild
+    meta[b"tfm.params"] = json.dumps(params).encode()
+    pq.write_table(table.replace_schema_metadata(meta), copy)
+    shutil.copy(stored_run.with_name("curve.fields.nc"), tmp_path / "curve.fields.nc")
+    assert main(["animate", str(copy)]) == 0
+    err = capsys.readouterr().err
+    assert "does not rebuild" in err and "frames" in err and copy.with_suffix(".gif").exists()
+
+
+def test_a_table_renamed_with_its_snapshots_still_finds_them(stored_run, tmp_path, capsys):
+    """Renamed together (g.parquet, g.fields.nc), the table was said to have stored no
+    snapshots, with advice to rerun it; deleted, the same."""
+    import shutil
+
+    table, fields = tmp_path / "g.parquet", tmp_path / "g.fields.nc"
+    shutil.copy(stored_run, table)
+    shutil.copy(stored_run.with_name("curve.fields.nc"), fields)
+    assert main(["show", str(table), "--step", "pull_off"]) == 0
+    fields.unlink()
+    assert main(["show", str(table)]) == 2
+    err = capsys.readouterr().err
+    assert "the run stored field snapshots, but they are not beside the table" in err
+    assert "curve.fields.nc and g.fields.nc" in err
 
 
 def test_show_without_snapshots_says_how_to_get_them(tmp_path, capsys):
@@ -336,10 +392,10 @@ def test_views_refuse_a_campaigns_joined_curves_and_its_summary(tmp_path, capsys
     (["plot", "{run}", "-o", "{tmp}/x.txt"], "x.txt must end with .png or .pdf or .svg"),
     (["show", "{run}", "-o", "{tmp}/x.jpg"], "x.jpg must end with .png or .pdf or .svg"),
     (["animate", "{run}", "-o", "{tmp}/x.webm"], "x.webm must end with .gif or .mp4"),
-    (["animate", "{run}", "-o", "{tmp}/x.gif", "--fps", "0"], "--fps 0: expected 0 < fps <= 100 for a GIF"),
-    (["animate", "{run}", "-o", "{tmp}/x.gif", "--fps", "-3"], "--fps -3: expected 0 < fps <= 100"),
-    (["animate", "{run}", "-o", "{tmp}/x.gif", "--fps", "500"], "--fps 500: expected 0 < fps <= 100"),
-    (["animate", "{run}", "-o", "{tmp}/x.mp4", "--fps", "nan"], "--fps nan: expected a finite fps > 0"),
+    (["animate", "{run}", "-o", "{tmp}/x.gif", "--fps", "0"], "--fps 0: expected 0.01 <= fps <= 100 for a GIF"),
+    (["animate", "{run}", "-o", "{tmp}/x.gif", "--fps", "-3"], "--fps -3: expected 0.01 <= fps <= 100"),
+    (["animate", "{run}", "-o", "{tmp}/x.gif", "--fps", "500"], "--fps 500: expected 0.01 <= fps <= 100"),
+    (["animate", "{run}", "-o", "{tmp}/x.mp4", "--fps", "nan"], "--fps nan: expected a finite fps >= 0.01"),
     (["plot", "{tmp}/garbage.parquet", "-o", "{tmp}/x.png"], "garbage.parquet: not a readable Parquet table"),
     (["show", "{tmp}/garbage.parquet", "-o", "{tmp}/x.png"], "garbage.parquet: not a readable Parquet table"),
     # a mistyped folder was made silently; `tfm run -o` refuses it
@@ -365,6 +421,14 @@ def test_the_fps_range_is_what_a_gif_can_store():
     with pytest.raises(ViewError):
         check_fps(GIF_MAX_FPS * 1.01, "a.gif")
     check_fps(120, "a.mp4")                                  # MP4 stores the rate itself
+    # at the other end, a GIF frame lasts at most 65535 cs: 0.001 fps crashed the writer
+    # (OverflowError) after the old file had been truncated
+    from tfm.viewcli import MIN_FPS
+    check_fps(MIN_FPS, "a.gif")
+    assert int(1000 / MIN_FPS) / 10 <= 65535
+    for fps in (0.001, MIN_FPS * 0.99):
+        with pytest.raises(ViewError):
+            check_fps(fps, "a.gif")
 
 
 # ---- contact maps: units, colour bar, contact line ----------------------------------------

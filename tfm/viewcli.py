@@ -8,6 +8,7 @@ stored field snapshots (``<stem>.fields.nc``, see tfm.snapshots).
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 import warnings
@@ -108,8 +109,23 @@ def load_run(path: Path):
         print(f"tfm: note: {path}: its parameter record does not rebuild ({exc}); drawn without "
               "the caption and the analytical reference", file=sys.stderr)
         params = None
-    fields = path.parent / meta["fields"] if meta.get("fields") else fields_path_for(path)
-    return curve, params, (fields if fields.exists() else None)
+    # the name the table recorded, else the table's own <stem>.fields.nc (a table renamed
+    # with its snapshots); _need_fields checks that they are this run's
+    candidates = ([path.parent / meta["fields"]] if meta.get("fields") else []) + [fields_path_for(path)]
+    found = next((f for f in candidates if f.exists()), None)
+    if found is None and meta.get("fields"):
+        return curve, params, Missing(candidates)
+    return curve, params, found
+
+
+class Missing:
+    """The snapshots a table names but that are not beside it (moved or deleted)."""
+
+    def __init__(self, looked: list):
+        self.looked = looked
+
+    def __bool__(self):
+        return False
 
 
 def _check_one_curve(path: Path, curve, meta: dict) -> None:
@@ -128,6 +144,10 @@ def _check_one_curve(path: Path, curve, meta: dict) -> None:
 
 
 def _need_fields(path, fields, params):
+    if isinstance(fields, Missing):
+        raise ViewError(f"{path}: the run stored field snapshots, but they are not beside the table (looked "
+                        f"for {' and '.join(str(f.name) for f in fields.looked)}): moved or deleted? Put the "
+                        f"file back as {fields.looked[-1]}, or rerun the run with --snapshots")
     if fields is None:
         raise ViewError(f"{path}: the run stored no field snapshots; rerun it with --snapshots events "
                         "(or --snapshots K for every K-th step)")
@@ -242,7 +262,7 @@ def _animate(args) -> Path:
     fields = _need_fields(path, fpath, params)
     n = animate(fields, curve, params, out, fps=args.fps, unload_only=not args.all_phases)
     events = " (the run stored snapshots at its events only; --snapshots K stores every K-th step)" \
-        if params.snapshots == "events" else ""
+        if params is not None and params.snapshots == "events" else ""
     print(f"{n} frames{events}", file=sys.stderr)
     return out
 
@@ -261,28 +281,24 @@ def frame_steps(fields, curve, unload_only: bool = True) -> list[int]:
 
 ANIMATION_SUFFIXES = (".gif", ".mp4")
 # A GIF stores frame durations in whole centiseconds: above 100 fps the duration
-# (int(1000 / fps) ms) is 0, which viewers replace by their own default.
+# (int(1000 / fps) ms) is 0, which viewers replace by their own default; the longest it
+# can store is 655.35 s. Below 0.01 fps (100 s a frame) nothing is an animation.
 GIF_MAX_FPS = 100.0
+MIN_FPS = 0.01
 
 
 def check_fps(fps: float, out) -> None:
     import math
 
     gif = Path(out).suffix.lower() == ".gif"
-    if not (fps > 0 and math.isfinite(fps)) or (gif and fps > GIF_MAX_FPS):
-        allowed = f"0 < fps <= {GIF_MAX_FPS:g} for a GIF" if gif else "a finite fps > 0"
+    if not (fps >= MIN_FPS and math.isfinite(fps)) or (gif and fps > GIF_MAX_FPS):
+        allowed = f"{MIN_FPS:g} <= fps <= {GIF_MAX_FPS:g} for a GIF" if gif else f"a finite fps >= {MIN_FPS:g}"
         raise ViewError(f"--fps {fps:g}: expected {allowed}")
 
 
 def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = True, dpi: int = 110) -> int:
     """Write a GIF (Pillow) or MP4 (ffmpeg) of the stored snapshots; returns the frame count."""
     import shutil
-
-    import numpy as np
-    from matplotlib import rc_context
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    from . import plots
 
     out = Path(out)
     if out.suffix.lower() not in ANIMATION_SUFFIXES:
@@ -293,6 +309,24 @@ def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = Tr
     steps = frame_steps(fields, curve, unload_only)
     if not steps:
         raise ViewError(f"{fields.path}: no snapshots to animate")
+    # through a temporary file beside it: a failed write leaves an earlier animation whole
+    out.parent.mkdir(parents=True, exist_ok=True)
+    final, out = out, out.with_name(f".{out.stem}.{os.getpid()}.tmp{out.suffix}")
+    try:
+        _write_animation(fields, curve, params, out, fps, steps, dpi)
+        os.replace(out, final)
+    finally:
+        out.unlink(missing_ok=True)
+    return len(steps)
+
+
+def _write_animation(fields, curve, params, out, fps, steps, dpi) -> None:
+    import numpy as np
+    from matplotlib import rc_context
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from . import plots
+
     # one colour scale for every frame: the most compressive force shown, and F_th
     fmin = 0.0
     for k in steps:
@@ -341,9 +375,8 @@ def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = Tr
         if writer is not None:
             writer.finish()
     if frames:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        frames[0].save(out, save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0)
-    return len(steps)
+        frames[0].save(out, save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0,
+                       format="GIF")
 
 
 def _to_palette(canvas):
