@@ -161,6 +161,21 @@ def test_a_load_step_that_runs_out_of_tries_is_flagged():
     assert res.summary["rounds_exceeded"] and "max_rounds=1" in res.summary["warnings"]
 
 
+def test_a_load_step_that_runs_out_of_moves_says_so_not_max_rounds():
+    """A contact softer than Hertz's (the local kernel) ran out of moves below its target
+    load, and the flag blamed max_rounds, which raising could not help (a user's hunt)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = tfm.simulate(spacing="1/32", shape="paraboloid", k_th=0.02, max_indent=0.05, kernel="local",
+                           c_w=30, control="force", load_step=0.0047450836, step=1e-4, extent=1.0)
+    w = res.summary["warnings"]
+    assert "load steps stopped below their target load" in w and "max_rounds" not in w
+    assert not res.summary["rounds_exceeded"]
+    assert res.summary["max_force"] < res.params.peak_load * (1 - 1e-3)     # it did fall short
+
+
 def test_a_fine_step_under_a_coarse_load_step_reaches_the_load():
     """One load step of 0.0047 with step 2e-6 needs 25,000 moves of one step: max_rounds
     capped them, loading stopped at a quarter of max_load, and the jump-off was 20 % low,

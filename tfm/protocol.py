@@ -282,7 +282,11 @@ def _load_to(state: ContactState, target: float, d: float, step: float, k: int,
             entered += rec.n_entered
             break
     else:
-        out.rounds_exceeded += 1          # flagged; the state is the last one taken
+        # flagged; the state is the last one taken
+        if moves >= max_moves:
+            out.loads_short += 1
+        else:
+            out.rounds_exceeded += 1
         if rec is None:                   # every try went beyond: the shallowest of them
             d, trial, rec = over
             _adopt(state, trial)

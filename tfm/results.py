@@ -264,6 +264,10 @@ def summarize(curve, out, p: Params, n_springs: int, grid_side: int | None) -> d
                            "can make the compliance indefinite"))
     if out.rounds_exceeded:
         warnings.append(f"snap/enter rounds hit max_rounds={p.max_rounds} at {out.rounds_exceeded} steps")
+    if getattr(out, "loads_short", 0):
+        warnings.append(f"force control: {out.loads_short} load steps stopped below their target load: the flat "
+                        "moved twice the Hertz depth of the peak load without reaching it (a contact softer than "
+                        "Hertz's?); the curve's largest load is max_force")
     if not out.unload_complete:
         warnings.append("unloading stopped at max_unload_steps with springs still in contact")
     from .guards import contact_reached_note

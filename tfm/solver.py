@@ -65,6 +65,7 @@ class CurveResult:
     max_residual: float = 0.0
     solver_failures: int = 0
     rounds_exceeded: int = 0
+    loads_short: int = 0         # force control: load steps whose moves ran out below the target
     refines: int = 0             # loose decision solves carried on to tol (compiled path)
     edge_steps: int = 0
     unload_complete: bool = True
