@@ -238,15 +238,18 @@ def check(p, memory: bool = True) -> list[str]:
             _refuse("memory", f"spacing/extent: the run needs about {need / 2**30:.1f} GiB "
                               f"({n_springs(p):,} springs, operator {p.operator}) but "
                               f"{have / 2**30:.1f} GiB is available. Coarsen the spacing or shrink extent")
-    # a flat punch is in full contact at any depth: its pull-off does not depend on the preload
-    if p.max_indent == "auto" and p.shape != "flat_punch":
+    # a flat punch is in full contact at any depth: its pull-off does not depend on the preload.
+    # An explicit max_load is the user's preload, as an explicit max_indent is (not flagged:
+    # at 1/32 a max_load of 0.004, depth 0.045 where the estimate asks 0.082, gave a jump-off
+    # of 0.00383539 against 0.00383539 from the estimate's depth, 2026-11-25)
+    explicit_load = p.control == "force" and p.max_load is not None
+    if p.max_indent == "auto" and p.shape != "flat_punch" and not explicit_load:
         from .protocol import n_loading_steps
         from .theory import auto_max_indent_uncapped
 
         wanted = auto_max_indent_uncapped(p)
         if wanted > p.delta_max * (1 + 1e-12):
-            why = ("max_load: its Hertz preload is" if p.control == "force" and p.max_load is not None
-                   else "max_indent: auto preload capped at 0.5 R =")
-            notes.append(f"{why} {p.delta_max:.4g} (the JKR estimate asks for {wanted:.4g}); the "
+            notes.append(f"max_indent: auto preload capped at 0.5 R = {p.delta_max:.4g} (the JKR estimate "
+                         f"asks for {wanted:.4g}); the "
                          f"preload may be too shallow for the pull-off; {n_loading_steps(p)} loading steps")
     return notes
