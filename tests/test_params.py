@@ -245,3 +245,18 @@ def test_submodules_are_attributes_after_a_bare_import():
             "try:\n    tfm.no_such_thing\nexcept AttributeError as e:\n    print('AttributeError')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["read_metadata", "ensemble_stats", "tfm.theory", "True", "AttributeError"]
+
+
+def test_the_physics_sheet_lists_where_every_parameter_applies():
+    """docs/physics.md's table of where each parameter has an effect had lost max_load and
+    load_step, and theta's kernel condition."""
+    from pathlib import Path
+
+    from tfm.params import APPLIES
+
+    sheet = (Path(__file__).resolve().parents[1] / "docs" / "physics.md").read_text()
+    rows = [line for line in sheet.splitlines() if line.startswith("| `")]
+    for name in APPLIES:
+        assert any(f"`{name}`" in row.split("|")[1] for row in rows), name
+    theta = next(row for row in rows if row.startswith("| `theta`"))
+    assert "boussinesq" in theta

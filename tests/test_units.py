@@ -168,6 +168,8 @@ def test_units_parameters_sweep_in_a_campaign():
     (dict(spacing=R / 32, step=2.5e-4, max_indent=R * 0.02), "step: must be <= max_indent .*metres"),
     (dict(k_th=0.02), "k_th: with units='si' give work_of_adhesion"),
     (dict(f_th=1e-6), "work_of_adhesion / f_th: .* not both"),
+    # neither given was told "not both"
+    (dict(work_of_adhesion=None), "work_of_adhesion / f_th: .* neither was given"),
     (dict(alpha=0.5), "alpha: must be 0.75 with work_of_adhesion"),
     (dict(k_th_coefficient="limt"), "k_th_coefficient: unknown value 'limt'"),
     (dict(k_th_coefficient=-2), "k_th_coefficient: must be > 0"),

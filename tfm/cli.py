@@ -41,7 +41,8 @@ PARAM_HELP = {
     "max_unload_steps": "cap on unloading steps (default 20 x loading steps + 1000)",
     "preconditioner": "auto | fft | stencil | diagonal | none",
     "extent": "grid half-width (default: from the Hertz radius at max_indent)",
-    "extent_margin": "auto extent = margin * contact radius + 4 spacings",
+    "extent_margin": "auto extent = margin * the Hertz radius sqrt(R max_indent) + 4 spacings (sqrt(2 R "
+                     "max_indent) for the short-range kernels, R for a flat punch)",
     "control": "displacement (the paper) | force: load to max_load, lower the load until jump-off",
     "max_load": "control=force: peak compressive load (default: the Hertz load at max_indent)",
     "load_step": "control=force: load increment and decrement (default max_load / 100)",

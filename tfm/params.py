@@ -862,8 +862,9 @@ def _validate_units(p: Params) -> None:
         raise ParameterError("k_th: with units='si' give work_of_adhesion (J/m^2), from which K_th follows, "
                              "or an explicit f_th in newtons; k_th is in paper units")
     if (p.work_of_adhesion is None) == (p.f_th is None):
+        which = "neither was given" if p.f_th is None else "not both"
         raise ParameterError("work_of_adhesion / f_th: units='si' needs one threshold: work_of_adhesion "
-                             "(J/m^2) or f_th (N), not both")
+                             f"(J/m^2) or f_th (N); {which}")
     if p.work_of_adhesion is not None:
         if _finite("work_of_adhesion", p.work_of_adhesion) < 0:
             raise ParameterError(f"work_of_adhesion: must be >= 0 (J/m^2), got {p.work_of_adhesion!r}")

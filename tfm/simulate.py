@@ -60,9 +60,9 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     unless ``keep_checkpoint``: then the caller removes it once it has stored the result (a
     campaign worker's result may yet be lost on its way to the campaign process). A file
     there that is not this run's saved state (another run's, or no checkpoint at all) is
-    refused, and left alone, unless ``replace_checkpoint``: then it is set aside with a
-    warning and replaced. This run's state saved by another version of tfm is always set
-    aside (it cannot promise the same numbers)."""
+    refused, and left alone, unless ``replace_checkpoint``: then it is not used, and the
+    run's own saves overwrite it (no copy is kept). This run's state saved by another
+    version of tfm is always set aside with a warning (it cannot promise the same numbers)."""
     from . import protocol
 
     if p is None:

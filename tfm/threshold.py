@@ -14,7 +14,7 @@ in spring order from ``numpy.random.default_rng(disorder_seed)``:
 
 - "uniform": xi uniform on [1 - sqrt(3) w, 1 + sqrt(3) w] (w <= 1/sqrt(3): F_th >= 0);
 - "weibull": xi = W / Gamma(1 + 1/m) with W a standard Weibull variable of modulus m,
-  the m whose coefficient of variation is w (m = 1 at w = 1, m ~ 1.2/w for small w).
+  the m whose coefficient of variation is w (m = 1 at w = 1, m ~ pi/(sqrt(6) w) = 1.28/w for small w).
   The weakest-link distribution of brittle strength; its lower tail pins crack fronts.
 
 Random thresholds make the crack front of the pull-off a pinned elastic line, the
