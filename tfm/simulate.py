@@ -74,7 +74,7 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
             if overrides.get(given) is not None and other not in overrides:
                 merged.pop(other, None)
         p = Params.from_dict(merged)
-    elif not isinstance(p, Params):
+    elif isinstance(p, (str, bytes, int, float, list, tuple, os.PathLike)):
         raise ParameterError(f"simulate: expected a tfm.Params or a dict of parameters, got {type(p).__name__}")
     elif overrides:
         p = p.replace(**overrides)
