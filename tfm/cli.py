@@ -279,12 +279,11 @@ def _appeared(path: Path | None, args, run_id: str) -> Path | None:
 
 
 def cmd_run(args) -> int:
-    from .guards import check
+    from .guards import check, kernel_check_key
     from .plot_worker import start_worker
 
     p = _params_from_args(args)
     notes = check(p)                      # refuses meaningless or oversized runs (exit 2)
-    from .guards import kernel_check_key
     if kernel_check_key(p) is not None:   # a kernel that may be indefinite: before the header
         from .operators import check_record
         check_record(p)

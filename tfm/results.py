@@ -186,6 +186,33 @@ def _gone(pid: int) -> bool:
     return False
 
 
+def remove_dead_files(folder: Path, globs: list[str], pattern, min_age: float = 0.0,
+                      own: bool = False) -> list[Path]:
+    """Remove the files of ``folder`` matching one of ``globs`` whose name fully matches
+    ``pattern`` (a compiled regex whose first group that matched is the writer's pid), whose
+    pid no longer runs here, untouched for ``min_age`` seconds and, with ``own``, ours."""
+    import time
+
+    removed = []
+    try:
+        candidates = [path for glob in globs for path in folder.glob(glob)]
+    except OSError:
+        return removed
+    for path in candidates:
+        match = pattern.fullmatch(path.name)
+        if not match:
+            continue
+        try:
+            st = path.stat()
+            if ((not own or st.st_uid == os.getuid()) and time.time() - st.st_mtime >= min_age
+                    and _gone(int(next(g for g in match.groups() if g is not None)))):
+                path.unlink()
+                removed.append(path)
+        except OSError:
+            pass
+    return removed
+
+
 def remove_dead_temporaries(*outputs: str | os.PathLike) -> list[Path]:
     """Remove what a killed tfm process (kill -9, a crash) left beside the outputs: the
     temporary files it wrote them through, named after the output and its pid
@@ -194,23 +221,11 @@ def remove_dead_temporaries(*outputs: str | os.PathLike) -> list[Path]:
     import re
 
     removed = []
-    for out in outputs:
-        out = Path(out)
+    for out in map(Path, outputs):
         stem, suffix = re.escape(out.stem), re.escape(out.suffix)
         pattern = re.compile(rf"\.(?:{re.escape(out.name)}\.(\d+)\.(?:probe\.)?tmp"
                              rf"|{stem}\.(\d+)\.(?:tmp|worker){suffix})")
-        try:
-            candidates = list(out.parent.glob(f".{out.stem}.*"))
-        except OSError:
-            continue
-        for path in candidates:
-            match = pattern.fullmatch(path.name)
-            if match and _gone(int(match.group(1) or match.group(2))):
-                try:
-                    path.unlink()
-                    removed.append(path)
-                except OSError:
-                    pass
+        removed += remove_dead_files(out.parent, [f".{out.stem}.*"], pattern)
     return removed
 
 

@@ -66,28 +66,12 @@ def remove_dead_temporary_fields(folder: str | os.PathLike | None = None,
     untouched for ``min_age`` seconds (a process of another pid namespace sharing the
     folder would be writing to its file)."""
     import re
-    import time
 
-    from .results import _gone
+    from .results import remove_dead_files
 
-    folder = Path(folder or tempfile.gettempdir())
     pattern = re.compile(r"\.?tfm-(\d+)-[^/]*\.fields\.nc(?:\.\d+\.tmp)?")
-    removed = []
-    try:
-        candidates = list(folder.glob("tfm-*.fields.nc")) + list(folder.glob(".tfm-*.fields.nc.*.tmp"))
-    except OSError:
-        return removed
-    for path in candidates:
-        match = pattern.fullmatch(path.name)
-        try:
-            st = path.stat()
-            if (match and st.st_uid == os.getuid() and time.time() - st.st_mtime >= min_age
-                    and _gone(int(match.group(1)))):
-                path.unlink()
-                removed.append(path)
-        except OSError:
-            pass
-    return removed
+    return remove_dead_files(Path(folder or tempfile.gettempdir()),
+                             ["tfm-*.fields.nc", ".tfm-*.fields.nc.*.tmp"], pattern, min_age, own=True)
 
 
 class _Copy:

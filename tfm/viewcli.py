@@ -111,21 +111,10 @@ def load_run(path: Path):
         params = None
     # the name the table recorded, else the table's own <stem>.fields.nc (a table renamed
     # with its snapshots); _need_fields checks that they are this run's
-    candidates = ([path.parent / meta["fields"]] if meta.get("fields") else []) + [fields_path_for(path)]
-    found = next((f for f in candidates if f.exists()), None)
-    if found is None and meta.get("fields"):
-        return curve, params, Missing(candidates)
-    return curve, params, found
-
-
-class Missing:
-    """The snapshots a table names but that are not beside it (moved or deleted)."""
-
-    def __init__(self, looked: list):
-        self.looked = looked
-
-    def __bool__(self):
-        return False
+    # (a path that does not exist: the table names snapshots that are gone)
+    named = path.parent / meta["fields"] if meta.get("fields") else None
+    found = next((f for f in (named, fields_path_for(path)) if f is not None and f.exists()), None)
+    return curve, params, found or named
 
 
 def _check_one_curve(path: Path, curve, meta: dict) -> None:
@@ -144,10 +133,12 @@ def _check_one_curve(path: Path, curve, meta: dict) -> None:
 
 
 def _need_fields(path, fields, params):
-    if isinstance(fields, Missing):
+    if fields is not None and not fields.exists():
+        from .results import fields_path_for
+        looked = list(dict.fromkeys([fields.name, fields_path_for(path).name]))
         raise ViewError(f"{path}: the run stored field snapshots, but they are not beside the table (looked "
-                        f"for {' and '.join(str(f.name) for f in fields.looked)}): moved or deleted? Put the "
-                        f"file back as {fields.looked[-1]}, or rerun the run with --snapshots")
+                        f"for {' and '.join(looked)}): moved or deleted? Put the file back as "
+                        f"{fields_path_for(path)}, or rerun the run with --snapshots")
     if fields is None:
         raise ViewError(f"{path}: the run stored no field snapshots; rerun it with --snapshots events "
                         "(or --snapshots K for every K-th step)")
