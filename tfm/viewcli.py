@@ -47,7 +47,8 @@ def register(sub) -> None:
                                       "step); one with snapshots = events gives a frame per event.")
     anim.add_argument("run", help="curve .parquet, a folder with one, or a campaign run id")
     anim.add_argument("-o", "--output", help="a .gif (Pillow) or .mp4 (needs ffmpeg); default <stem>.gif")
-    anim.add_argument("--fps", type=float, default=8.0, help="frames per second (default 8; at most 100 for a GIF)")
+    anim.add_argument("--fps", type=float, default=8.0,
+                      help="frames per second (default 8; 0.01 to 100 for a GIF, at least 0.01 for MP4)")
     anim.add_argument("--all-phases", action="store_true", help="loading too, not only the unloading")
     _overwrite_flag(anim)
     anim.set_defaults(func=cmd_animate)
