@@ -260,3 +260,17 @@ def test_the_physics_sheet_lists_where_every_parameter_applies():
         assert any(f"`{name}`" in row.split("|")[1] for row in rows), name
     theta = next(row for row in rows if row.startswith("| `theta`"))
     assert "boussinesq" in theta
+
+
+def test_snapshots_read_like_every_other_whole_number():
+    """From a file or a dict, snapshots = "5.0" gave 5 while 5.0 (a TOML float) was refused;
+    every other whole-number parameter takes both."""
+    kw = dict(spacing="1/32", k_th=0.02)
+    assert Params.from_dict({**kw, "max_iter": 2000.0}).max_iter == 2000
+    for value in (5, "5", "5.0", 5.0):
+        assert Params.from_dict({**kw, "snapshots": value}).snapshots == 5
+    for value in (2.5, "2.5"):
+        with pytest.raises(ParameterError, match="snapshots: expected"):
+            Params.from_dict({**kw, "snapshots": value})
+    with pytest.raises(ParameterError, match="snapshots: expected an integer, got True"):
+        Params.from_dict({**kw, "snapshots": True})

@@ -640,7 +640,7 @@ def _validate(p: Params) -> None:
 
 
 def _coerce_snapshots(value: Any, prefix: str) -> Any:
-    """``snapshots``: "none" (also None), "events", or a whole number k given as int or text."""
+    """``snapshots``: "none" (also None), "events", or a whole number k, given as a number or as text."""
     if value is None:
         return "none"
     if isinstance(value, str) and value.strip().lower() in SNAPSHOT_MODES:
@@ -652,6 +652,8 @@ def _coerce_snapshots(value: Any, prefix: str) -> Any:
             raise ParameterError(f"{prefix}snapshots: expected 'none', 'events' or a whole number k "
                                  f"(every k-th step), got {value!r}") from None
         return int(number) if number.is_integer() else number
+    if isinstance(value, float) and value.is_integer():
+        return int(value)               # as every whole-number parameter (a TOML 5.0)
     return value
 
 
