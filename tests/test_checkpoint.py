@@ -329,3 +329,48 @@ def test_tfm_run_refuses_a_checkpoint_that_cannot_serve(tmp_path, capsys, extra,
     assert tfm_main([*CLI_RUN, "-o", str(tmp_path / "c.parquet"), *extra]) == 2
     assert expected in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(snapshots="events"), dict(control="force", max_indent="auto")])
+def test_ctrl_c_without_a_checkpoint_waits_for_the_step_in_progress(tmp_path, capsys, kw):
+    """Without a checkpoint (force control, field snapshots, --no-checkpoints), Ctrl-C
+    raised KeyboardInterrupt wherever it landed; inside the argument handling of a compiled
+    call it came out as a TypeError traceback (1 of 8 timed tries of `tfm run`). Now the
+    signal waits for the end of the step in progress there too, then KeyboardInterrupt."""
+    p = P.replace(**kw)
+    handlers = []
+
+    def progress(rec):
+        handlers.append(signal.getsignal(signal.SIGINT))
+        if rec.step + 1 == 5:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    fields = tmp_path / "run.fields.nc" if p.snapshots != "none" else None
+    with pytest.raises(KeyboardInterrupt):
+        simulate(p, progress=progress, fields_path=fields)
+    assert "SIGINT: stopping after the step in progress (a second signal" in capsys.readouterr().err
+    assert len(handlers) == 5                 # it stopped after that step
+    assert all(h is not signal.default_int_handler for h in handlers)   # deferred all along
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_ctrl_c_while_the_run_is_set_up_stops_it_once_set_up(monkeypatch, capsys):
+    """Ctrl-C while the compiled kernels loaded from Numba's cache was swallowed by a ctypes
+    callback ("Exception ignored on calling ctypes callback function"), and the run went
+    on to write its table. Now the signal waits for the end of the set-up, then stops."""
+    sim = sys.modules["tfm.simulate"]             # the module (tfm.simulate is the function)
+    built = []
+
+    def build_then_signal(q):
+        os.kill(os.getpid(), signal.SIGINT)       # lands while the problem is built
+        built.append(sim_build(q))
+        return built[-1]
+
+    sim_build = sim.build_problem
+    monkeypatch.setattr(sim, "build_problem", build_then_signal)
+    steps = []
+    with pytest.raises(KeyboardInterrupt):
+        simulate(P, progress=steps.append)
+    assert built and not steps                    # the set-up finished, no step ran
+    assert "SIGINT: stopping once the run is set up" in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

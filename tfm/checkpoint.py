@@ -11,7 +11,9 @@ bit for bit, as a run that was never stopped (tests/test_checkpoint.py).
 SIGINT (Ctrl-C) or SIGTERM (a cluster's time limit, `kill`) during a checkpointed run is
 acted on after the step in progress: the state is saved, then the signal goes to the
 handler that was there before (KeyboardInterrupt, the process's end, a campaign's own), so
-a stopped run loses no finished step. A second signal acts at once (StopRequest).
+a stopped run loses no finished step. A second signal acts at once (StopRequest). A run
+without a checkpoint waits for the end of its step in progress the same way, with nothing
+to save (tfm.protocol.run).
 
 A checkpoint serves only the run it was written for (the run id hashes every parameter)
 and the same engine (a hash of tfm's source files): other code could not promise the same
@@ -77,14 +79,16 @@ def stop_patiently() -> None:
 
 
 class StopRequest:
-    """SIGINT and SIGTERM while a checkpointed run computes: remembered, and acted on at the
-    next step boundary (``pending``), where the run saves its state and calls ``deliver``.
+    """SIGINT and SIGTERM while a run computes: remembered, and acted on at the next step
+    boundary (``pending``), where a checkpointed run saves its state in ``path`` (None: a
+    run without a checkpoint) and calls ``deliver``.
     Installed only in the main thread (only it may handle signals) and only for signals
     that are not ignored (a campaign's pool workers ignore SIGINT: their campaign decides).
     A second signal stops at once, except after ``stop_patiently()``."""
 
-    def __init__(self, path):
+    def __init__(self, path, until: str = "after the step in progress"):
         self.path = path
+        self.until = until
         self.signum: int | None = None
         self._saved: dict = {}
 
@@ -99,16 +103,17 @@ class StopRequest:
                 self.deliver()
             return
         self.signum = signum
+        why = "" if self.path is None else f", to save the run's state in {self.path}"
         if _PATIENT:                       # a campaign's worker: its campaign sent the signal
-            print(f"tfm: stopping after the step in progress, to save the run's state in {self.path}",
-                  file=sys.stderr, flush=True)
+            print(f"tfm: stopping {self.until}{why}", file=sys.stderr, flush=True)
         else:
-            print(f"tfm: {signal.Signals(signum).name}: stopping after the step in progress, to save the "
-                  f"run's state in {self.path} (a second signal stops at once)", file=sys.stderr, flush=True)
+            print(f"tfm: {signal.Signals(signum).name}: stopping {self.until}{why} "
+                  "(a second signal stops at once)", file=sys.stderr, flush=True)
 
     @contextlib.contextmanager
     def installed(self):
-        if threading.current_thread() is threading.main_thread():
+        # a campaign's worker with nothing to save: its campaign's SIGTERM stops it at once
+        if threading.current_thread() is threading.main_thread() and not (_PATIENT and self.path is None):
             for sig in (signal.SIGINT, signal.SIGTERM):
                 if signal.getsignal(sig) is not signal.SIG_IGN:
                     self._saved[sig] = signal.signal(sig, self)

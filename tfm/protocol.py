@@ -51,12 +51,30 @@ def run(p, prob: Problem, observe: Observer | None = None, checkpoint=None) -> C
     and continues from a saved state."""
     n_load = n_loading_steps(p)
     max_unload = p.max_unload_steps or (20 * n_load + 1000)
-    if p.control == "force":
-        if checkpoint is not None:
+    if checkpoint is not None:
+        if p.control == "force":
             raise ValueError("checkpoint: force control is not checkpointed")
-        return force_control(prob, p.peak_load, p.load_decrement, p.step, max_unload, observe,
-                             depth=p.delta_max)
-    return displacement_control(prob, p.delta_max, p.step, max_unload, observe, checkpoint)
+        return displacement_control(prob, p.delta_max, p.step, max_unload, observe, checkpoint)
+    # Nothing to save, but a signal still waits for the end of the step in progress: raised
+    # inside a compiled call's argument handling it came out as a TypeError, and inside a
+    # snapshot's write it could leave the stream half written. A second signal acts at once.
+    stop = StopRequest(None)
+
+    def observe_then_stop(state, rec):
+        if observe is not None:
+            observe(state, rec)
+        if stop.pending:
+            stop.deliver()
+
+    with stop.installed():
+        if p.control == "force":
+            out = force_control(prob, p.peak_load, p.load_decrement, p.step, max_unload, observe_then_stop,
+                                depth=p.delta_max)
+        else:
+            out = displacement_control(prob, p.delta_max, p.step, max_unload, observe_then_stop)
+        if stop.pending:
+            stop.deliver()
+    return out
 
 
 def n_loading_steps(p) -> int:

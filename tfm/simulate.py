@@ -7,7 +7,7 @@ import warnings
 from collections.abc import Mapping
 from pathlib import Path
 
-from .checkpoint import CHECKPOINT_EVERY, Checkpoint, why_not
+from .checkpoint import CHECKPOINT_EVERY, Checkpoint, StopRequest, why_not
 from .geometry import heights, make_layout
 from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
@@ -102,7 +102,14 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     prov = provenance()
     # an SI record is solved as its paper-units twin (tfm.units, L* = 1 m), then scaled back
     q = to_paper(p)
-    prob, layout = build_problem(q)
+    # Ctrl-C while the compiled kernels load from Numba's cache was swallowed by a ctypes
+    # callback, and the run went on: a signal waits for the end of the set-up (as for each
+    # step, in tfm.protocol.run)
+    setup = StopRequest(None, until="once the run is set up")
+    with setup.installed():
+        prob, layout = build_problem(q)
+        if setup.pending:
+            setup.deliver()
     writer = None
     if p.snapshots != "none":
         from .snapshots import SnapshotWriter, temporary_fields_path
