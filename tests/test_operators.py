@@ -82,6 +82,28 @@ def test_boussinesq_with_small_self_term_is_refused_and_paper_value_accepted():
     assert check_positive_definite(q, kernel_spec(q, make_layout(q)), make_layout(q)) > 0
 
 
+@pytest.mark.parametrize("extent", [7 / 8, 6 / 8], ids=["P30-even", "P25-odd"])
+def test_grid_symbol_bounds_the_dense_matrix_tightly(extent):
+    """The symbol's minimum bounds the grid matrix's smallest eigenvalue from below (the
+    matrix is a principal submatrix of the circulant embedding). With the embedding's line
+    at offset P/2 of an even P left at zero, the minimum sat at (self_term - 2.905)/spacing
+    against the matrix's (self_term - 1.61)/spacing: self terms in between (2.5) were
+    refused on grids of even P and accepted on others, and the bounds of the decision
+    tolerances and the preconditioner's C^-1 carried the dip."""
+    p = tiny(extent=extent, self_term=2.5)
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    sym, P = grid_symbol(spec, layout)
+    assert P % 2 == (0 if extent == 7 / 8 else 1)
+    C = compliance_double_loop(layout.x, layout.y, spec.diag, "boussinesq", spec.cutoff)
+    lowest = np.linalg.eigvalsh(C)[0]
+    assert sym.min() <= lowest * (1 + 1e-12)
+    # how far below: the finite grid's edge, 0.008/spacing at 15 x 15 (the gap closes like
+    # 1/n: 0.002 at 29 x 29); the dip was 1.28/spacing
+    assert (lowest - sym.min()) * p.spacing < 0.01
+    assert check_positive_definite(p, spec, layout) == sym.min() > 0
+
+
 def test_jittered_close_pair_outside_the_central_patch_is_refused():
     """The tester's layout: one pair 0.258 spacings apart (1/r above the self term
     3.8/spacing, so C is indefinite) lies outside the dense check's central patch; the
