@@ -104,6 +104,31 @@ def test_grid_symbol_bounds_the_dense_matrix_tightly(extent):
     assert check_positive_definite(p, spec, layout) == sym.min() > 0
 
 
+def test_hexagonal_self_term_indefinite_beyond_the_central_patch_is_refused():
+    """Self term 1.434 on a hexagonal grid: the central 1200 springs are positive definite
+    (smallest eigenvalue +5.6e-4/spacing) but 3000 are not (-5.3e-4/spacing); the check
+    took the 1200 and accepted a run whose solves then failed to converge. It now
+    extrapolates from 300 and 1200 springs; 1.45 (3000 springs: +1.7e-2) still runs."""
+    kw = dict(spacing=1 / 32, f_th=0, shape="flat_punch", radius=1.0, max_indent=0.002, step=2e-4,
+              layout="hexagonal", operator="direct", extent=1.4)
+    for self_term, ok in ((1.434, False), (1.45, True)):
+        p = Params.from_dict(dict(kw, self_term=self_term))
+        layout = make_layout(p)
+        if ok:
+            assert check_positive_definite(p, kernel_spec(p, layout), layout) > 0
+        else:
+            with pytest.raises(IllPosedKernel, match="self_term=1.434 is not positive definite.*Raise self_term"):
+                check_positive_definite(p, kernel_spec(p, layout), layout)
+
+
+def test_advice_never_asks_for_a_jitter_below_zero():
+    p = tiny(self_term=1.0, layout="jittered", operator="direct", jitter=0.1)
+    layout = make_layout(p)
+    with pytest.raises(IllPosedKernel) as caught:
+        check_positive_definite(p, kernel_spec(p, layout), layout)
+    assert "Lower jitter" not in str(caught.value) and "Raise self_term" in str(caught.value)
+
+
 def test_jittered_close_pair_outside_the_central_patch_is_refused():
     """The tester's layout: one pair 0.258 spacings apart (1/r above the self term
     3.8/spacing, so C is indefinite) lies outside the dense check's central patch; the

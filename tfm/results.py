@@ -275,8 +275,10 @@ def summarize(curve, out, p: Params, n_springs: int, grid_side: int | None) -> d
     if out.solver_failures:
         warnings.append(f"contact solve did not converge {out.solver_failures} times "
                         f"(worst relative residual {out.max_residual:.2e}, tol {p.tol:g}); raise max_iter"
-                        + ("" if p.layout == "square" else ", or reduce jitter: a cluster of close springs "
-                           "can make the compliance indefinite"))
+                        + (", or reduce jitter or raise self_term: a cluster of close springs can make the "
+                           "compliance indefinite" if p.layout == "jittered" else
+                           ", or raise self_term: the compliance may be nearly indefinite"
+                           if p.layout == "hexagonal" else ""))
     if out.rounds_exceeded:
         warnings.append(f"snap/enter rounds hit max_rounds={p.max_rounds} at {out.rounds_exceeded} steps")
     if getattr(out, "loads_short", 0):
