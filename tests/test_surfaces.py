@@ -267,6 +267,24 @@ def test_contact_at_a_cropped_side_of_a_height_map_is_flagged(tmp_path, capsys):
     assert "not used" not in capsys.readouterr().err
 
 
+def test_the_row_an_even_height_map_leaves_over_is_noted_not_flagged(tmp_path, capsys):
+    """A 64 x 64 map at its own pixel size: the centred grid leaves its last pixel along
+    each axis unused, and contact next to it was flagged as a too-small grid ("raise
+    extent_margin or give a larger extent", both refused for a map), exit 3. Now it is
+    noted before the run; a 63 x 63 map leaves nothing over."""
+    from tfm.cli import main
+
+    for n, note in ((64, True), (63, False)):
+        flat = _map(tmp_path, f"flat{n}.npy", array=np.zeros((n, n)))
+        assert main(["run", "--shape", "height_map", "--height-map", flat, "--map-pixel-size", "1/32",
+                     "--spacing", "1/32", "--f-th", "0", "--max-indent", "0.01", "--step", "1e-3",
+                     "-o", str(tmp_path / f"flat{n}.parquet"), "--no-plot"]) == 0
+        err = capsys.readouterr().err
+        assert "grid edge" not in err
+        assert ("64 x 64 pixels, an even count: the grid, centred on pixel (31, 31), leaves the map's last "
+                "pixel along x and y unused" in err) == note
+
+
 @pytest.mark.parametrize("array, match", [
     (np.zeros((5, 5, 2)), "2-D"),
     (np.full((41, 41), np.nan), "NaN"),

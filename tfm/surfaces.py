@@ -396,9 +396,11 @@ def map_cropped_edge(p, x: np.ndarray, y: np.ndarray, edge: np.ndarray) -> np.nd
     cx, cy = (nx - 1) // 2, (ny - 1) // 2
     hw = float(max(np.abs(x).max(), np.abs(y).max())) if x.size else 0.0
     near = 1.5 * p.spacing                                    # as wide as the ring (geometry)
-    cut = lambda room: room >= p.spacing * (1 - 1e-9)        # another ring of springs fits
-    sides = ((cut((nx - 1 - cx) * a - hw), x >= hw - near), (cut(cx * a - hw), x <= -hw + near),
-             (cut((ny - 1 - cy) * a - hw), y >= hw - near), (cut(cy * a - hw), y <= -hw + near))
+    # another ring of springs fits on both sides: the grid is centred, so the row that an
+    # even pixel count leaves over on one side is no crop a larger extent could undo
+    cut = lambda room: room >= p.spacing * (1 - 1e-9)
+    cut_x, cut_y = cut(min(cx, nx - 1 - cx) * a - hw), cut(min(cy, ny - 1 - cy) * a - hw)
+    sides = ((cut_x, x >= hw - near), (cut_x, x <= -hw + near), (cut_y, y >= hw - near), (cut_y, y <= -hw + near))
     mask = np.zeros(x.shape, dtype=bool)
     for cropped, on_side in sides:
         if cropped:
@@ -417,11 +419,17 @@ def map_unused_note(p) -> str | None:
     # square map always leaves less than a spacing, which is not worth a note)
     reach_x, reach_y = min((nx - 1) // 2, nx - 1 - (nx - 1) // 2) * a, min((ny - 1) // 2, ny - 1 - (ny - 1) // 2) * a
     hw = p.half_width
-    if max(reach_x, reach_y) - hw < p.spacing * (1 - 1e-9):
-        return None
-    return (f"height_map: the grid is the map's largest centred square (half-width {hw:.4g}); the map "
-            f"({nx} x {ny} pixels) reaches ±{reach_x:.4g} along x and ±{reach_y:.4g} along y, and its pixels "
-            "beyond the square are not used")
+    if max(reach_x, reach_y) - hw >= p.spacing * (1 - 1e-9):
+        return (f"height_map: the grid is the map's largest centred square (half-width {hw:.4g}); the map "
+                f"({nx} x {ny} pixels) reaches ±{reach_x:.4g} along x and ±{reach_y:.4g} along y, and its "
+                "pixels beyond the square are not used")
+    if a >= p.spacing * (1 - 1e-9) and (nx % 2 == 0 or ny % 2 == 0):
+        # the row left over holds springs: contact there is not flagged (map_cropped_edge)
+        return (f"height_map: {nx} x {ny} pixels, an even count: the grid, centred on pixel "
+                f"({(nx - 1) // 2}, {(ny - 1) // 2}), leaves the map's last pixel along "
+                f"{'x and y' if nx % 2 == ny % 2 else 'x' if nx % 2 == 0 else 'y'} unused (contact next to it is "
+                "not flagged); crop the map to an odd count to use all of it")
+    return None
 
 
 def map_heights(p, x: np.ndarray, y: np.ndarray) -> np.ndarray:
