@@ -299,3 +299,30 @@ def test_paper_campaigns_cover_every_result():
     stems = {p.stem for p in PAPER_CAMPAIGNS}
     from tfm.paper import CAMPAIGNS
     assert {stem for _, stem in CAMPAIGNS} <= stems
+
+
+def test_analysis_refuses_what_it_cannot_fit_by_name():
+    """confidence=95 (for 0.95) gave NaN intervals and a text claiming "(2 points: no CI)"
+    for 4 points; empty input raised numpy's IndexError or argmax errors; a run without
+    adhesion had a pull-off of -0.0."""
+    import pandas as pd
+
+    from tfm import analysis
+
+    x, y = np.array([1.0, 2.0, 4.0, 8.0]), np.array([1.0, 2.9, 8.1, 23.0])
+    for fit, args in ((analysis.fit_power_law, (x, y)), (analysis.fit_line, (x, y)),
+                      (analysis.plateau, (x, y)), (analysis.fit_limit, (x, y)),
+                      (analysis.convergent_alpha, (x, y - 5.0))):
+        with pytest.raises(ValueError, match=f"{fit.__name__}: confidence must be in \\(0, 1\\), e.g. 0.95, got 95"):
+            fit(*args, confidence=95)
+    assert fit_power_law(x, y, confidence=0.9).ci_low > fit_power_law(x, y).ci_low   # a narrower interval
+    with pytest.raises(ValueError, match="plateau: need at least one point"):
+        analysis.plateau([], [])
+    empty = pd.DataFrame({"phase": [], "indent": [], "force": [], "contact_area": [], "contact_radius": []})
+    with pytest.raises(ValueError, match="run_metrics: the curve has no rows"):
+        analysis.run_metrics(empty)
+    with pytest.raises(ValueError, match="hertz_errors: the curve has no loading step"):
+        analysis.hertz_errors(empty, 1.0, 1 / 32)
+    pushed = pd.DataFrame({"phase": ["load", "unload"], "indent": [0.01, 0.0], "force": [0.02, 0.0],
+                           "contact_area": [0.1, 0.0]})
+    assert math.copysign(1.0, analysis.run_metrics(pushed)["pull_off_force"]) == 1.0

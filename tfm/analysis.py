@@ -91,6 +91,12 @@ class LineFit(_Interval):
     confidence: float = CONFIDENCE
 
 
+def _check_confidence(confidence, who: str) -> None:
+    """A confidence level is a probability: 95 for 0.95 gave NaN intervals, without a word."""
+    if isinstance(confidence, bool) or not isinstance(confidence, (int, float)) or not 0.0 < confidence < 1.0:
+        raise ValueError(f"{who}: confidence must be in (0, 1), e.g. 0.95, got {confidence!r}")
+
+
 def _t_quantile(dof: int, confidence: float) -> float:
     if dof <= 0:
         return math.inf
@@ -132,6 +138,7 @@ def fit_power_law(x, y, confidence: float = CONFIDENCE) -> PowerLawFit:
 
     Points with x <= 0 or y <= 0 have no logarithm and are refused (drop them first,
     e.g. the k_th = 0 run of the paper's Fig. 6a)."""
+    _check_confidence(confidence, "fit_power_law")
     x, y = _positive(x, y, "fit_power_law")
     _two_distinct(x, "fit_power_law")
     n = x.size
@@ -157,6 +164,7 @@ def fit_line(x, y, through_origin: bool = False, confidence: float = CONFIDENCE)
 
     A free line needs two distinct x, one through the origin one x != 0; with exactly
     that many the line is determined and its interval is infinite."""
+    _check_confidence(confidence, "fit_line")
     x, y = _clean(x, y, "fit_line")
     n = x.size
     if through_origin:
@@ -236,6 +244,7 @@ def convergent_alpha(alphas, slopes, confidence: float = CONFIDENCE) -> ZeroCros
     refused. If b is not significantly nonzero (its own interval contains 0), the
     crossing's confidence set is unbounded (Fieller's theorem) and the interval is
     returned as (-inf, inf), where the delta method would give a finite but meaningless one."""
+    _check_confidence(confidence, "convergent_alpha")
     a_, s_ = _clean(alphas, slopes, "convergent_alpha", ("alphas", "slopes"))
     _two_distinct(a_, "convergent_alpha", "alphas")
     n = a_.size
@@ -286,6 +295,8 @@ def hertz_errors(curve: pd.DataFrame, radius: float, spacing: float, min_fractio
 
     load = curve[curve["phase"] == "load"]
     load = load[load["indent"] > 0]
+    if load.empty:
+        raise ValueError("hertz_errors: the curve has no loading step with indent > 0")
     deepest = load.iloc[-1]
     p_th = float(hertz_force(deepest["indent"], radius))
     deep = load[load["indent"] >= min_fraction * deepest["indent"]]
@@ -403,6 +414,7 @@ def fit_limit(x, y, confidence: float = CONFIDENCE, p_bounds: tuple[float, float
     solved exactly; the best p minimises the residual sum of squares. The interval of
     y_inf is its extent over the confidence set (see ``LimitFit``), that of p the grid
     points whose best RSS is under the threshold. Needs at least four points."""
+    _check_confidence(confidence, "fit_limit")
     x, y = _clean(x, y, "fit_limit")
     if np.any(x <= 0):
         raise ValueError("fit_limit: x must be > 0")
@@ -521,7 +533,10 @@ def plateau(x, y, confidence: float = CONFIDENCE) -> Plateau:
     Where the limit fit cannot find a trend (its p interval open), this is the estimate
     that assumes none is left: it is only as good as that assumption, and says so by its
     width (the scatter of the points, e.g. the staircase of the discrete contact edge)."""
+    _check_confidence(confidence, "plateau")
     x, y = _clean(x, y, "plateau")
+    if x.size == 0:
+        raise ValueError("plateau: need at least one point")
     x_min = float(x.max()) / 2.0 ** PLATEAU_OCTAVES
     keep = x >= x_min * (1 - 1e-12)
     sel = y[keep]
@@ -556,7 +571,10 @@ def area_at_max_load(curve: pd.DataFrame) -> float:
 
 def run_metrics(curve: pd.DataFrame) -> dict:
     """Pull-off force, hysteresis and contact area at maximum load of one run's curve."""
-    return {"pull_off_force": float(max(-curve["force"].min(), 0.0)),
+    if len(curve) == 0:
+        raise ValueError("run_metrics: the curve has no rows")
+    tension = -float(curve["force"].min())
+    return {"pull_off_force": tension if tension > 0 else 0.0,     # never -0.0 (a run without adhesion)
             "hysteresis": hysteresis(curve),
             "area_at_max_load": area_at_max_load(curve)}
 
