@@ -374,3 +374,29 @@ def test_ctrl_c_while_the_run_is_set_up_stops_it_once_set_up(monkeypatch, capsys
     assert built and not steps                    # the set-up finished, no step ran
     assert "SIGINT: stopping once the run is set up" in capsys.readouterr().err
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+class _GoneReader:
+    """stderr whose reader is gone (Ctrl-C also ends the `tee` that output goes through)."""
+
+    def write(self, text):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    def flush(self):
+        pass
+
+    def fileno(self):
+        raise OSError("no file descriptor")
+
+
+def test_ctrl_c_with_stderr_gone_still_saves_the_step(reference, tmp_path, monkeypatch):
+    """`tfm campaign run ... 2>&1 | tee log`, then Ctrl-C: the stop message's print raised
+    BrokenPipeError inside the run, which was then recorded as failed, with no checkpoint
+    saved. The message is dropped now; the state is saved and KeyboardInterrupt comes."""
+    path = tmp_path / "run.npz"
+    monkeypatch.setattr(sys, "stderr", _GoneReader())
+    with pytest.raises(KeyboardInterrupt):
+        simulate(P, progress=signal_after(7), checkpoint=path)
+    assert tfm.checkpoint.read_meta(path)["steps"] == 7
+    monkeypatch.undo()
+    assert_same_run(simulate(P, checkpoint=path), reference)

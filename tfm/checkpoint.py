@@ -40,6 +40,7 @@ import numpy as np
 
 from .config import CHECKPOINT_EVERY
 from .params import ParameterError
+from .progress import say
 from .results import code_hash
 
 FORMAT = 1
@@ -105,10 +106,9 @@ class StopRequest:
         self.signum = signum
         why = "" if self.path is None else f", to save the run's state in {self.path}"
         if _PATIENT:                       # a campaign's worker: its campaign sent the signal
-            print(f"tfm: stopping {self.until}{why}", file=sys.stderr, flush=True)
+            say(f"tfm: stopping {self.until}{why}")
         else:
-            print(f"tfm: {signal.Signals(signum).name}: stopping {self.until}{why} "
-                  "(a second signal stops at once)", file=sys.stderr, flush=True)
+            say(f"tfm: {signal.Signals(signum).name}: stopping {self.until}{why} (a second signal stops at once)")
 
     @contextlib.contextmanager
     def installed(self):

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from . import __version__
 from .params import ParameterError, Params
+from .progress import say
 from .viewcli import register as register_views
 
 
@@ -438,8 +439,8 @@ def main(argv=None) -> int:
         # no traceback for a Ctrl-C; say what survives (the table is written only at the end)
         written = getattr(args, "written", None)
         if written is not None:
-            print(f"tfm: interrupted: the table {written} was written, the figure was not "
-                  f"(tfm plot {written} draws it)", file=sys.stderr)
+            say(f"tfm: interrupted: the table {written} was written, the figure was not "
+                f"(tfm plot {written} draws it)")
             return 130
         ckpt = getattr(args, "checkpoint_path", False)
         if ckpt is False:                 # stopped before its outputs were planned
@@ -451,7 +452,7 @@ def main(argv=None) -> int:
             kept = f"; its checkpoint {ckpt} lets the same command continue"
         else:
             kept = "; it was stopped before its first step was saved"
-        print(f"tfm: interrupted: no table written{kept}", file=sys.stderr)
+        say(f"tfm: interrupted: no table written{kept}")
         return 130
     finally:
         if argv is None:

@@ -15,6 +15,19 @@ HOT_KERNELS = (("tfm.kernels.grid", "blocked_dot"),)
 SOLVER_MODULE = "tfm.solver"
 
 
+def say(text: str) -> None:
+    """A line on stderr when a run is stopped. Its reader may be gone: Ctrl-C also ends the
+    `tee` that a run's output is piped through, and the BrokenPipeError of a plain print
+    stopped the run before it saved its state. Then stderr goes to /dev/null from here on."""
+    try:
+        print(text, file=sys.stderr, flush=True)
+    except BrokenPipeError:
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stderr.fileno())
+        except (OSError, ValueError):   # no file descriptor (a replaced sys.stderr)
+            pass
+
+
 def in_ci() -> bool:
     return os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
 

@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import copy
 import math
-import sys
 import time
 from typing import Callable
 
 import numpy as np
 
 from .checkpoint import DONE, StopRequest
+from .progress import say
 from .params import MAX_STEPS
 from .solver import ContactState, CurveResult, Problem, StepRecord
 
@@ -114,8 +114,7 @@ def displacement_control(prob: Problem, delta_max: float, step: float, max_unloa
         elapsed = before + time.perf_counter() - t0
         if stop.pending:
             checkpoint.save(state, out, phase, j, elapsed)
-            print(f"tfm: saved the state after step {len(out.steps)} in {checkpoint.path}", file=sys.stderr,
-                  flush=True)
+            say(f"tfm: saved the state after step {len(out.steps)} in {checkpoint.path}")
             stop.deliver()
         else:
             checkpoint.step_done(state, out, phase, j, elapsed)

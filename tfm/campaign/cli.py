@@ -7,6 +7,7 @@ import signal
 import sys
 from pathlib import Path
 
+from ..progress import say
 from .spec import CampaignError, load_spec
 
 
@@ -94,7 +95,7 @@ def cmd_run(args) -> int:
                             rerun_stale=args.rerun_stale, only=only,
                             checkpoint_every=args.checkpoint_every)
     except KeyboardInterrupt as exc:      # CampaignInterrupted: the message says how to resume
-        print(f"tfm: {str(exc) or 'interrupted'}", file=sys.stderr)
+        say(f"tfm: {str(exc) or 'interrupted'}")
         return 128 + getattr(exc, "signum", signal.SIGINT)
     status = CampaignStore(root).status(spec)
     if status.flagged and not args.quiet:
