@@ -158,6 +158,7 @@ class Checkpoint:
         self.resumed_at = None     # the step a loaded checkpoint continues from
         self.set_aside = None      # why a checkpoint found here was not used
         self.save_when_done = False  # also save the finished curve (phase DONE)
+        self.failed_saves = 0      # saves that could not be written (try_save)
 
     # ---- reading -------------------------------------------------------------
     def saved_run_id(self) -> str | None:
@@ -214,7 +215,24 @@ class Checkpoint:
     def step_done(self, state, out, phase: str, j: int, elapsed: float) -> None:
         """Called after every finished step; saves if ``every`` seconds have passed."""
         if time.monotonic() - self._last >= self.every:
+            self.try_save(state, out, phase, j, elapsed)
+
+    def try_save(self, state, out, phase: str, j: int, elapsed: float) -> bool:
+        """``save``, but a write that fails (a full disk, a quota) warns and lets the run go
+        on, trying again ``every`` seconds later: a checkpoint only guards the curve, and
+        its OSError used to end the run and lose the whole curve, even when the table
+        would have fit. The last checkpoint saved, if any, stays (saves are atomic)."""
+        try:
             self.save(state, out, phase, j, elapsed)
+            return True
+        except OSError as exc:
+            self._last = time.monotonic()
+            if not self.failed_saves:
+                warnings.warn(f"run {self.run_id}: {exc}; the run goes on without it"
+                              + (f" and tries again every {self.every:g} s" if phase != DONE else ""),
+                              CheckpointWarning, stacklevel=2)
+            self.failed_saves += 1
+            return False
 
     def save(self, state, out, phase: str, j: int, elapsed: float) -> None:
         """Write the state atomically: a temporary file in the same folder, then renamed."""

@@ -113,8 +113,8 @@ def displacement_control(prob: Problem, delta_max: float, step: float, max_unloa
     def done(phase, j):
         elapsed = before + time.perf_counter() - t0
         if stop.pending:
-            checkpoint.save(state, out, phase, j, elapsed)
-            say(f"tfm: saved the state after step {len(out.steps)} in {checkpoint.path}")
+            if checkpoint.try_save(state, out, phase, j, elapsed):
+                say(f"tfm: saved the state after step {len(out.steps)} in {checkpoint.path}")
             stop.deliver()
         else:
             checkpoint.step_done(state, out, phase, j, elapsed)
@@ -125,7 +125,7 @@ def displacement_control(prob: Problem, delta_max: float, step: float, max_unloa
         if stop.pending:                 # it came during the last step: keep the whole curve
             done(DONE, 0)
         elif checkpoint.save_when_done:  # the caller stores the result, then removes it
-            checkpoint.save(state, out, DONE, 0, out.wall_time)
+            checkpoint.try_save(state, out, DONE, 0, out.wall_time)
     return out
 
 
