@@ -123,6 +123,35 @@ def test_a_stopped_run_leaves_no_temporary_snapshot_file(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == [mine] and mine.read_bytes() == b"kept"
 
 
+def test_snapshots_stop_before_the_disk_is_full_and_the_run_is_kept(tmp_path, monkeypatch):
+    """A disk that fills during a run with snapshots: HDF5 raised thousands of errors in its
+    destructors and the process died by segfault, with no table. Now the snapshots stop
+    while the file can still be closed, the run goes on and is flagged, and the file holds
+    every step before."""
+    import shutil
+
+    import tfm.snapshots
+
+    real = shutil.disk_usage
+    calls = []
+
+    def filling(path):
+        calls.append(path)
+        free = tfm.snapshots.DISK_RESERVE + (10**9 if len(calls) <= 6 else 0)
+        return real(path)._replace(free=free)
+
+    monkeypatch.setattr(tfm.snapshots.shutil, "disk_usage", filling)
+    path = tmp_path / "run.fields.nc"
+    with pytest.warns(tfm.RunWarning, match="field snapshots stopped at step 6: 64.0 MiB free on .* under the "
+                                            r"64.\d MiB kept for the next snapshot and the table; the file holds "
+                                            "the steps before"):
+        res = tfm.simulate(spacing=1 / 16, step=2e-3, snapshots=1, fields_path=path, **STANDARD)
+    assert not res.ok and len(res.curve) > 20
+    f = Fields(path)
+    assert list(f.steps) == [0, 1, 2, 3, 4, 5]
+    assert f.snapshot(5)["force"] == pytest.approx(res.curve["force"].iloc[5], rel=1e-15)
+
+
 def test_no_snapshots_no_file(tmp_path):
     res = tfm.simulate(spacing=1 / 16, step=2e-3, **STANDARD)
     assert res.fields_path is None

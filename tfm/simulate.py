@@ -138,6 +138,8 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
         summary["length_unit"], summary["force_unit"] = labels["length"], labels["force"]
         summary["warnings"] = "; ".join(filter(None, notes + [summary["warnings"]]))
         if writer is not None:
+            if writer.stopped:             # a flag: the snapshots asked for are not all there
+                summary["warnings"] = "; ".join(filter(None, [summary["warnings"], writer.stopped]))
             writer.close(summary)
     except BaseException:
         if writer is not None:

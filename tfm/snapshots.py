@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -47,6 +48,8 @@ STATE_NEVER, STATE_CONTACT, STATE_RELEASED = 0, 1, 2
 EVENTS = ("max_load", "pull_off", "first_snap", "last_contact")
 # CF unit strings of (length, force, area) per unit system
 CF_UNITS = {"paper": ("L*", "F*", "L*^2"), "si": ("m", "N", "m^2")}
+# free disk kept beside the snapshots, for the table, the figure and HDF5's own metadata
+DISK_RESERVE = 64 * 2**20
 
 
 def temporary_fields_path() -> Path:
@@ -110,6 +113,8 @@ class SnapshotWriter:
         self._best_load = self._best_pull = self._prev = None
         self._first_snap_done = False
         self._events: dict[str, int] = {}
+        self._snapshot_bytes = 17 * layout.n    # F and u (f8) and state (i1), before compression
+        self.stopped: str | None = None         # why snapshots stopped early (_room)
         self.scale = force_scale(p)           # newtons per F* (1 in paper units)
         L, F_, A = CF_UNITS[p.units]
         units = ("the paper's nondimensional units: length L*, force F* = 2 pi G L*^2 / (1 - nu)"
@@ -204,8 +209,24 @@ class SnapshotWriter:
     def _settle(self, event, snap: _Copy) -> None:
         self._write(snap.rec, snap.F, snap.u, snap.state, event)
 
+    def _room(self, step: int) -> bool:
+        """Whether the disk has room for another snapshot and the table after it. HDF5 on a
+        full disk raised thousands of errors in its destructors and then crashed the
+        process (segfault), taking the curve with it; so the snapshots stop first, while
+        the file can still be closed (``stopped``, a flag of the run)."""
+        if self.stopped is None:
+            free = shutil.disk_usage(self._tmp.parent).free
+            need = 2 * self._snapshot_bytes + DISK_RESERVE
+            if free < need:
+                self.stopped = (f"field snapshots stopped at step {step}: {free / 2**20:.1f} MiB free on "
+                                f"{self._tmp.parent}, under the {need / 2**20:.1f} MiB kept for the next snapshot "
+                                "and the table; the file holds the steps before")
+        return self.stopped is None
+
     def _write(self, rec: dict, F, u, state, label: str) -> None:
         step = rec["step"]
+        if not self._room(step):
+            return
         label_event = label.split("_")[0] != "every"
         if label_event:
             self._events[label] = step
