@@ -95,8 +95,21 @@ def test_a_meaningless_run_is_refused_and_can_be_allowed(kw, guard, match):
     with pytest.raises(GuardError, match=match) as info:
         guards.check(p)
     assert f"allow={guard!r}" in str(info.value) and f"--allow {guard}" in str(info.value)
-    guards.check(p.replace(allow=guard))                   # the override
+    # the override runs, with the guard's reason as a note (a flag in the summary): an
+    # allowed run was exit 0 with an empty warnings column, taken for a clean one
+    notes = guards.check(p.replace(allow=guard))
+    assert [n for n in notes if n.startswith(f"allowed past the {guard!r} guard: ")]
     assert p.replace(allow=guard).run_id == p.run_id       # changes no number, so not hashed
+
+
+def test_an_allowed_run_is_flagged():
+    from tfm import RunWarning, simulate
+
+    p = Params.from_dict(dict(spacing="1/16", k_th=0.02, shape="paraboloid", max_indent=0.01, step=1e-3,
+                              allow="coarse"))
+    with pytest.warns(RunWarning, match="allowed past the 'coarse' guard: spacing: only"):
+        res = simulate(p)
+    assert not res.ok and "allowed past the 'coarse' guard" in res.summary["warnings"]
 
 
 def test_the_guards_refuse_in_simulate_before_any_work(monkeypatch):
@@ -142,7 +155,7 @@ def test_a_run_that_cannot_fit_is_refused_before_it_starts(monkeypatch):
     assert guards.estimate_memory(big) > 10 * 2 ** 30
     with pytest.raises(GuardError, match=r"spacing/extent: the run needs about \d+\.\d GiB .* 8.0 GiB is available"):
         guards.check(big)
-    guards.check(big.replace(allow="memory"))
+    assert guards.check(big.replace(allow="memory"))[0].startswith("allowed past the 'memory' guard: ")
     tree = big.replace(operator="tree", layout="jittered")
     with pytest.raises(GuardError, match="operator tree"):
         guards.check(tree)

@@ -67,6 +67,15 @@ def _refuse(guard: str, message: str) -> None:
     raise GuardError(f"{message}. To run it anyway, allow={guard!r} (CLI: --allow {guard}).")
 
 
+def _guard(notes: list, allowed: set, guard: str, message: str) -> None:
+    """Refuse, or, where the guard is allowed, run with its reason as a note: stated before
+    the run and kept among the summary's warnings (a flag), so a forced run is never taken
+    for a clean one (an allowed coarse run was exit 0 with an empty warnings column)."""
+    if guard not in allowed:
+        _refuse(guard, message)
+    notes.append(f"allowed past the {guard!r} guard: {message}")
+
+
 # ---- estimates (no NumPy needed: cheap enough for a million-run campaign) -----------
 def contact_radius_estimate(p) -> float:
     """Contact radius at maximum load: the punch radius, Hertz sqrt(R d) for the elastic
@@ -204,8 +213,8 @@ def check(p, memory: bool = True) -> list[str]:
     notes = []
     a = contact_radius_estimate(p)
     across = a / p.spacing
-    if across < MIN_SPRINGS_ACROSS_RADIUS and "coarse" not in allowed:
-        _refuse("coarse", f"spacing: only {_below(across, MIN_SPRINGS_ACROSS_RADIUS, 2)} springs across the "
+    if across < MIN_SPRINGS_ACROSS_RADIUS:
+        _guard(notes, allowed, "coarse", f"spacing: only {_below(across, MIN_SPRINGS_ACROSS_RADIUS, 2)} springs across the "
                           "contact radius at maximum "
                           f"load (a ~ {a:.3g}, spacing {p.spacing:.3g}); below "
                           f"{MIN_SPRINGS_ACROSS_RADIUS:g} the pull-off is erratic (errors of 50 to 170 %; "
@@ -222,20 +231,20 @@ def check(p, memory: bool = True) -> list[str]:
         from .theory import auto_max_indent
         depth = auto_max_indent(p, step_floor=False)
     steps = depth / p.step
-    if steps < MIN_LOADING_STEPS * (1 - 1e-9) and "step" not in allowed:
+    if steps < MIN_LOADING_STEPS * (1 - 1e-9):
         where = "the automatic preload depth" if auto else "max_indent"
-        _refuse("step", f"step: only {_below(steps, MIN_LOADING_STEPS)} loading steps to {where} {depth:.3g} "
+        _guard(notes, allowed, "step", f"step: only {_below(steps, MIN_LOADING_STEPS)} loading steps to {where} {depth:.3g} "
                         f"(step {p.step:.3g}); "
                         f"below {MIN_LOADING_STEPS} the step shifts the pull-off by up to 16 %. Use step <= "
                         f"{depth / MIN_LOADING_STEPS:.3g}" + (", or give max_indent" if auto else ""))
-    if p.tol > MAX_TOL and "tol" not in allowed:
-        _refuse("tol", f"tol: {p.tol:g} is looser than {MAX_TOL:g}; snap and entry decisions then "
+    if p.tol > MAX_TOL:
+        _guard(notes, allowed, "tol", f"tol: {p.tol:g} is looser than {MAX_TOL:g}; snap and entry decisions then "
                        "follow the solver error and can move the pull-off by a whole step (tol 1e-4: +0.95 % at "
                        "spacing 1/64; 3e-5: +0.56 % at 1/256; 1e-2: -27 %)")
     if memory:
         need, have = estimate_memory(p), available_memory()
-        if have is not None and need > have and "memory" not in allowed:
-            _refuse("memory", f"spacing/extent: the run needs about {need / 2**30:.1f} GiB "
+        if have is not None and need > have:
+            _guard(notes, allowed, "memory", f"spacing/extent: the run needs about {need / 2**30:.1f} GiB "
                               f"({n_springs(p):,} springs, operator {p.operator}) but "
                               f"{have / 2**30:.1f} GiB is available. Coarsen the spacing or shrink extent")
     # a flat punch is in full contact at any depth: its pull-off does not depend on the preload.
