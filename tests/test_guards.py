@@ -327,3 +327,44 @@ def test_a_neighbour_kernel_that_is_not_positive_definite_names_neighbor_rings()
 
     with pytest.raises(ParameterError, match="Raise neighbor_rings or self_term"):
         simulate(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05, step=1e-3, kernel="neighbors")
+
+
+def test_available_memory_heeds_control_groups_and_ulimit(tmp_path):
+    """The guard read only the machine's MemAvailable: under a SLURM or Docker limit, or
+    ulimit -v, a run it let through died of a MemoryError mid-run."""
+    import subprocess
+    import sys
+
+    GiB = 2 ** 30
+    proc = tmp_path / "cgroup"
+    proc.write_text("4:memory:/job/step\n0::/job2\n")
+    for folder, files in ((tmp_path / "memory/job", {"memory.limit_in_bytes": 6 * GiB,
+                                                      "memory.usage_in_bytes": 1 * GiB}),
+                          (tmp_path / "memory/job/step", {"memory.limit_in_bytes": 2 ** 63 - 4096,
+                                                           "memory.usage_in_bytes": 1 * GiB}),
+                          (tmp_path / "job2", {"memory.max": 3 * GiB, "memory.current": 2 * GiB})):
+        folder.mkdir(parents=True)
+        for name, value in files.items():
+            (folder / name).write_text(f"{value}\n")
+    assert sorted(guards._cgroup_rooms(str(proc), str(tmp_path))) == [1 * GiB, 5 * GiB]
+    (tmp_path / "job2/memory.max").write_text("max\n")           # v2 without a limit
+    assert guards._cgroup_rooms(str(proc), str(tmp_path)) == [5 * GiB]
+    code = ("import resource; resource.setrlimit(resource.RLIMIT_AS, (3 * 2**30, resource.RLIM_INFINITY)); "
+            "from tfm.guards import available_memory; print(available_memory())")
+    room = float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout)
+    assert 0 < room < 3 * GiB
+
+
+def test_running_out_of_memory_mid_run_is_a_message_not_a_traceback(tmp_path, monkeypatch, capsys):
+    import importlib
+
+    from tfm.cli import main
+
+    def short(*args, **kwargs):
+        raise MemoryError("Unable to allocate 3.1 GiB for an array")
+
+    monkeypatch.setattr(importlib.import_module("tfm.simulate"), "simulate", short)
+    assert main(["run", "--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.02",
+                 "--step", "1e-3", "--no-plot", "-o", str(tmp_path / "r.parquet")]) == 1
+    err = capsys.readouterr().err
+    assert "tfm: error: out of memory" in err and "Traceback" not in err

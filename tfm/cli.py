@@ -428,6 +428,11 @@ def main(argv=None) -> int:
     except ParameterError as exc:
         print(f"tfm: error: {exc}", file=sys.stderr)
         return 2
+    except MemoryError:
+        # a traceback from deep inside NumPy said nothing a user could act on
+        say("tfm: error: out of memory: the run needed more than this process could get (the estimate "
+            "before a run is in its first line). Coarsen the spacing or shrink extent")
+        return 1
     except BrokenPipeError:
         # the reader of the output went away (`tfm campaign list | head`): no traceback,
         # and nothing more written to the closed pipe at exit

@@ -159,15 +159,74 @@ def estimate_memory(p) -> float:
 
 
 def available_memory() -> float | None:
-    """Bytes the machine can give a new process now (MemAvailable), or None if unknown."""
+    """Bytes this process can still get (None if unknown): the machine's MemAvailable, and
+    less where a limit applies, a control group's (SLURM, Docker, systemd) or ulimit -v. A
+    job under such a limit passed the guard on the machine's figure and then died of a
+    MemoryError mid-run."""
+    rooms = []
     try:
         with open("/proc/meminfo") as fh:
             for line in fh:
                 if line.startswith("MemAvailable:"):
-                    return float(line.split()[1]) * 1024.0
+                    rooms.append(float(line.split()[1]) * 1024.0)
     except OSError:
         pass
-    return None
+    rooms += _cgroup_rooms()
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft != resource.RLIM_INFINITY:
+            rooms.append(max(float(soft) - _status_bytes("VmSize:"), 0.0))
+    except (ImportError, OSError, ValueError):
+        pass
+    return min(rooms) if rooms else None
+
+
+_NO_LIMIT = 2.0 ** 60       # cgroup v1 writes "no limit" as a page-rounded 2**63 - 1
+
+
+def _read_number(path: str) -> float | None:
+    try:
+        with open(path) as fh:
+            text = fh.read().strip()
+        return None if text == "max" else float(text)
+    except (OSError, ValueError):
+        return None
+
+
+def _cgroup_rooms(proc: str = "/proc/self/cgroup", root: str = "/sys/fs/cgroup") -> list[float]:
+    """limit - usage of this process's memory control group and of each group above it
+    (cgroup v2 memory.max, v1 memory.limit_in_bytes), where a limit is set."""
+    try:
+        with open(proc) as fh:
+            lines = fh.read().splitlines()
+    except OSError:
+        return []
+    rooms = []
+    for line in lines:
+        hier, controllers, path = (line.split(":", 2) + ["", ""])[:3]
+        if hier == "0" and controllers == "":
+            base, limit, usage = root, "memory.max", "memory.current"
+        elif "memory" in controllers.split(","):
+            base, limit, usage = f"{root}/memory", "memory.limit_in_bytes", "memory.usage_in_bytes"
+        else:
+            continue
+        parts = [q for q in path.split("/") if q]
+        for k in range(len(parts), -1, -1):            # the group, then its parents
+            folder = "/".join([base] + parts[:k])
+            cap, used = _read_number(f"{folder}/{limit}"), _read_number(f"{folder}/{usage}")
+            if cap is not None and cap < _NO_LIMIT and used is not None:
+                rooms.append(max(cap - used, 0.0))
+    return rooms
+
+
+def _status_bytes(key: str) -> float:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith(key):
+                return float(line.split()[1]) * 1024.0
+    return 0.0
 
 
 def contact_reached_note(p, max_n_contact: int) -> str | None:
