@@ -694,3 +694,16 @@ def test_temporary_snapshot_files_of_dead_processes_are_removed(tmp_path):
     assert remove_dead_temporary_fields(tmp_path) == []          # younger than an hour: kept
     assert sorted(p.name for p in remove_dead_temporary_fields(tmp_path, min_age=0)) == sorted(left)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(kept)
+
+
+@pytest.mark.parametrize("name, value", [("NUMBA_NUM_THREADS", "0"), ("NUMBA_NUM_THREADS", "-1"),
+                                         ("OMP_NUM_THREADS", "abc")])
+def test_a_bad_thread_count_in_the_environment_is_refused_by_name(monkeypatch, capsys, name, value):
+    """NUMBA_NUM_THREADS=0 gave a traceback from Numba's import, OMP_NUM_THREADS=abc
+    "internal error in the DUCC0 backend" from the first FFT."""
+    from tfm.cli import main
+
+    monkeypatch.setenv(name, value)
+    assert main(["campaign", "list"]) == 2
+    assert f"tfm: error: {name}: the environment variable must be a whole number >= 1 (threads), got {value!r}" \
+        in capsys.readouterr().err

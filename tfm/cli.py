@@ -397,6 +397,20 @@ def attach_negative_values(argv: list[str]) -> list[str]:
     return out
 
 
+THREAD_VARIABLES = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def check_thread_settings() -> None:
+    """A thread count that is not a whole number >= 1: Numba's 0 or -1 raised a traceback
+    mid-import, and OMP_NUM_THREADS=abc surfaced as "internal error in the DUCC0 backend"
+    from the first FFT. Refused up front, naming the variable (empty counts as unset)."""
+    for name in THREAD_VARIABLES:
+        value = os.environ.get(name, "").strip()
+        if value and not (value.isdigit() and int(value) >= 1):
+            raise ParameterError(f"{name}: the environment variable must be a whole number >= 1 (threads), "
+                                 f"got {os.environ[name]!r}")
+
+
 def main(argv=None) -> int:
     """The `tfm` command; ``argv`` None: the process's own arguments, and the process ends
     after it."""
@@ -421,6 +435,7 @@ def main(argv=None) -> int:
         # objects for a whole 1/64 curve, none for a 1/128 one after it; 2026-11-24).
         gc.disable()
     try:
+        check_thread_settings()
         code = args.func(args)
         if argv is None and args.func is cmd_run:
             exit_now(code)
