@@ -1050,3 +1050,25 @@ def test_runs_removed_from_the_file_are_reported_not_dropped_silently(tmp_path, 
     assert tfm_main(["campaign", "status", str(toml), *args]) == 0
     out = capsys.readouterr().out
     assert "2 done" in out and "not in the campaign file" not in out
+
+
+def test_a_dask_workers_own_thread_count_caps_its_share():
+    """`NUMBA_NUM_THREADS=1 dask worker ...` on a shared 2-core host ran every run on 2
+    threads (prov_numba_threads 2): the task wrote its share over the worker's own value."""
+    import subprocess
+    import sys
+
+    from tfm.campaign.runner import capped_threads
+
+    assert capped_threads(2, "1") == 1 and capped_threads(2, "4") == 2 and capped_threads(2, "") == 2
+    code = "import tfm.campaign.runner as r; print(r.capped_threads(2))"
+    env = dict(os.environ, NUMBA_NUM_THREADS="1")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    assert out.stdout.strip() == "1"
+
+
+def test_campaign_list_of_a_missing_folder_is_an_error(capsys):
+    from tfm.cli import main
+
+    assert main(["campaign", "list", "--dir", "no/such/folder"]) == 2
+    assert "dir: no/such/folder is not a folder" in capsys.readouterr().err

@@ -424,6 +424,9 @@ def test_ensemble_stats_mean_and_spread_over_seeds():
     assert r["pull_off_force_mean"] == pytest.approx(0.024)
     assert r["pull_off_force_std"] == pytest.approx(0.004)       # sample std, ddof = 1
     assert r["area_at_max_load_mean"] == pytest.approx(0.3) and r["area_at_max_load_std"] == 0.0
+    # the jittered layout's seed is a seed too: grouped by it, each group had n = 1
+    jittered = pd.DataFrame(rows).rename(columns={"p_roughness_seed": "p_seed"})
+    assert ensemble_stats(jittered, pd.concat(curves))["n"].tolist() == [3, 3]
 
 
 def test_rough_campaign_files_expand():

@@ -548,7 +548,7 @@ def plateau(x, y, confidence: float = CONFIDENCE) -> Plateau:
 
 
 # ---- ensembles over seeds (rough surfaces, disordered thresholds) -------------------
-SEED_COLUMNS = ("p_roughness_seed", "p_disorder_seed")
+SEED_COLUMNS = ("p_roughness_seed", "p_disorder_seed", "p_seed")     # p_seed: the jittered layout's
 
 
 def hysteresis(curve: pd.DataFrame) -> float:
@@ -596,6 +596,7 @@ def ensemble_stats(summary: pd.DataFrame, curves: pd.DataFrame, by=None,
     columns); within a group the seeds are the ensemble. Columns per metric: ``<m>_mean``,
     ``<m>_std`` (sample standard deviation, ddof = 1: the seed-to-seed scatter),
     ``<m>_ci`` (half-width of the Student-t interval of the mean), and ``n`` seeds."""
+    _check_confidence(confidence, "ensemble_stats")
     table = run_metrics_table(summary, curves)
     seeds = [s for s in seeds if s in table.columns]
     if by is None:

@@ -171,6 +171,8 @@ def _checkpoints(store, run_ids) -> dict[str, str]:
 def cmd_list(args) -> int:
     from .store import CampaignStore
 
+    if not Path(args.dir).is_dir():
+        raise CampaignError(f"dir: {args.dir} is not a folder")
     files = sorted(Path(args.dir).glob("*.toml"))
     if not files:
         print(f"no campaign files in {args.dir}/", file=sys.stderr)

@@ -532,6 +532,17 @@ def _start_pool(ctx, workers: int, threads: int, started, runs, ckpt=None):
     return pool, procs, futures
 
 
+# The NUMBA_NUM_THREADS a Dask worker was started with (`NUMBA_NUM_THREADS=1 dask worker
+# ...` on a shared host), read when a worker first loads this module, before _set_threads
+# writes its own: it caps the worker's share of the host's cores (it was overridden).
+_OWN_THREADS = os.environ.get("NUMBA_NUM_THREADS", "").strip()
+
+
+def capped_threads(share: int, own: str = _OWN_THREADS) -> int:
+    """``share`` threads, at most the worker's own NUMBA_NUM_THREADS where it set one."""
+    return min(share, int(own)) if own.isdigit() and int(own) >= 1 else share
+
+
 def _execute_dask(params, host_threads: dict[str, int], client_pid: int, height_map=None) -> Outcome:
     """The Dask task: share the host's cores among the worker threads on that host.
     ``height_map``: the run's map (a tfm.surfaces.HeightMap) as the client read it."""
@@ -543,7 +554,7 @@ def _execute_dask(params, host_threads: dict[str, int], client_pid: int, height_
     worker = get_worker()
     state = getattr(worker, "state", worker)
     host = get_address_host(worker.address)
-    threads = threads_per_worker(host_threads.get(host, state.nthreads))
+    threads = capped_threads(threads_per_worker(host_threads.get(host, state.nthreads)))
     # the environment is per process: set it only in a worker process of its own, not
     # in a client that runs its workers in-process (LocalCluster(processes=False))
     _set_threads(threads, set_env=os.getpid() != client_pid)
