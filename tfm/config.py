@@ -51,7 +51,7 @@ FFT_THREADED_SIZE = 192
 # only symmetry and positivity (its symbol is floored above zero). CG iterations of the
 # standard curve at 1/256 (2026-11-24): exact box 2 w - 1 7130; margin 0 7080, 2 6971,
 # 8 7029, 16 7058. (Inverting C's own symbol on a smaller box took 15-50 % more
-# iterations in earlier sessions; README, Performance.)
+# iterations in earlier sessions; bench/HISTORY.md.)
 PRE_BOX_MARGIN = 2
 
 
