@@ -28,7 +28,6 @@ import datetime as _dt
 import json
 import os
 import signal
-import sys
 import threading
 import time
 import warnings
