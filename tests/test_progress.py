@@ -82,6 +82,28 @@ def test_no_bar_when_ci_is_true(monkeypatch, ci, shown):
     assert ("step/s" in stream.getvalue() or "s/step" in stream.getvalue()) is shown
 
 
+@pytest.mark.parametrize("ci, lines", [("", 3), ("true", 0)])
+def test_a_batch_log_gets_a_progress_line_now_and_then(monkeypatch, ci, lines):
+    """With stderr a file (nohup, sbatch) the bar is off, and a 15-minute run printed
+    nothing between its header and its end. Now a plain line every BATCH_EVERY seconds."""
+    import tfm.progress
+    from tfm import Params
+    from tfm.progress import run_progress
+    from tfm.solver import StepRecord
+
+    monkeypatch.setenv("CI", ci)
+    monkeypatch.setattr(tfm.progress, "BATCH_EVERY", 0.0)
+    stream = io.StringIO()                                     # not a terminal
+    p = Params(spacing=1 / 16, k_th=0.02, f_th=None, shape="paraboloid")
+    with run_progress(p, stream=stream) as cb:
+        for k in range(3):
+            cb(StepRecord(k, "load", -1e-3 * k, 0.0, 0.0, 1, 0, 0, 1, 1))
+    got = [line for line in stream.getvalue().splitlines() if line.startswith(f"tfm run {p.run_id[:8]}: step")]
+    assert len(got) == lines
+    if lines:
+        assert got[-1].startswith(f"tfm run {p.run_id[:8]}: step 3, load 3/") and "d=-0.002 contact=1" in got[-1]
+
+
 def test_cold_cache_detection_names_kernels(monkeypatch):
     import tfm.kernels.grid as grid
 

@@ -8,11 +8,15 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import time
 
 # Kernels every run calls: if one of these has no valid on-disk cache entry, the run
 # starts by compiling. Dispatchers defined in tfm.solver count too (the compiled step).
 HOT_KERNELS = (("tfm.kernels.grid", "blocked_dot"),)
 SOLVER_MODULE = "tfm.solver"
+
+
+BATCH_EVERY = 60.0      # seconds between progress lines when stderr is not a terminal
 
 
 def say(text: str) -> None:
@@ -87,11 +91,21 @@ def run_progress(p, quiet: bool = False, stream=None):
     bar = tqdm(total=None, desc=f"tfm run {p.run_id[:8]}", unit="step", file=stream,
                disable=not show, dynamic_ncols=True, mininterval=0.2)
     n_load = n_loading_steps(p)
+    # a batch job's log (nohup, sbatch, a file): no bar, but a line every BATCH_EVERY seconds;
+    # a 15-minute run at 1/2048 printed nothing between its header and its end
+    batch = not show and not in_ci()
+    start = last = time.monotonic()
 
     def progress(rec) -> None:
+        nonlocal last
+        where = (f"{rec.phase}{'' if rec.phase != 'load' else f' {rec.step + 1}/{n_load}'} "
+                 f"d={rec.d:+.4g} contact={rec.n_contact}")
         bar.update(1)
-        bar.set_postfix_str(f"{rec.phase}{'' if rec.phase != 'load' else f' {rec.step + 1}/{n_load}'} "
-                            f"d={rec.d:+.4g} contact={rec.n_contact}", refresh=False)
+        bar.set_postfix_str(where, refresh=False)
+        if batch and time.monotonic() - last >= BATCH_EVERY:
+            last = time.monotonic()
+            print(f"tfm run {p.run_id[:8]}: step {rec.step + 1}, {where}, {(last - start) / 60:.1f} min",
+                  file=stream, flush=True)
 
     try:
         yield progress
