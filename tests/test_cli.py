@@ -707,3 +707,26 @@ def test_a_bad_thread_count_in_the_environment_is_refused_by_name(monkeypatch, c
     assert main(["campaign", "list"]) == 2
     assert f"tfm: error: {name}: the environment variable must be a whole number >= 1 (threads), got {value!r}" \
         in capsys.readouterr().err
+
+
+def test_a_figure_that_cannot_be_written_keeps_the_table_and_the_summary(tmp_path, monkeypatch, capsys):
+    """A disk that filled before the figure: the table was written, then the figure's
+    OSError ended `tfm run` with a traceback, and the summary and flags were never printed."""
+    import errno
+
+    import tfm.plot_worker
+    import tfm.plots
+    from tfm.cli import main
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(tfm.plot_worker, "start_worker", lambda p: None)     # draw in this process
+    monkeypatch.setattr(tfm.plots, "write_curve_figure", full)
+    out = tmp_path / "r.parquet"
+    assert main(["run", "--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.02",
+                 "--step", "1e-3", "-o", str(out)]) == 1
+    captured = capsys.readouterr()
+    assert f"tfm: error: the figure {tmp_path / 'r.png'} could not be written (No space left on device); the " \
+           f"table {out} is" in captured.err
+    assert out.exists() and not (tmp_path / "r.png").exists() and '"pull_off_force"' in captured.out

@@ -303,13 +303,21 @@ def cmd_run(args) -> int:
         if worker is not None:
             worker.cancel()
         raise
+    figure_lost = False
     if plot_path is not None:
         if failed:
             print(f"tfm: note: the figure's worker process failed ({failed}); drawing the figure here",
                   file=sys.stderr)
         if worker is None or failed:
             from .plots import write_curve_figure
-            write_curve_figure(res.curve, p, plot_path)
+            try:
+                write_curve_figure(res.curve, p, plot_path)
+            except OSError as exc:
+                # a full disk: the table is written, and its summary and flags are still
+                # worth printing (they were lost with the traceback); exit 1 below
+                print(f"tfm: error: the figure {plot_path} could not be written ({exc.strerror or exc}); "
+                      f"the table {out} is (tfm plot {out} draws it)", file=sys.stderr)
+                plot_path, figure_lost = None, True
     s = res.summary
     if not args.quiet:
         jump = ("jump_off_force", "jump_off_contact_radius") if p.control == "force" else ()
@@ -324,8 +332,7 @@ def cmd_run(args) -> int:
               + (f" and {res.fields_path}" if res.fields_path else ""), file=sys.stderr)
     if s["warnings"]:
         print(f"tfm: warning: {s['warnings']}", file=sys.stderr)
-        return 3
-    return 0
+    return 1 if figure_lost else 3 if s["warnings"] else 0
 
 
 def build_parser() -> argparse.ArgumentParser:
