@@ -454,6 +454,13 @@ def test_another_runs_checkpoint_is_not_discarded_without_overwrite(tmp_path, ca
     assert main(other) == 2
     assert "holds the saved state of another run" in capsys.readouterr().err
     assert ckpt.read_bytes() == saved and not out.exists()
+    # a damaged checkpoint, even of this very run: "rerun that run's command to continue
+    # it" told the user to do what they had just done
+    ckpt.write_bytes(saved[:100])
+    assert main(other) == 2
+    assert "no run can continue from it (damaged, or not a checkpoint): pass --overwrite to discard it" \
+        in capsys.readouterr().err
+    ckpt.write_bytes(saved)
     assert main([*other, "--overwrite"]) == 0
     assert "the run starts afresh" in capsys.readouterr().err
     assert not ckpt.exists() and out.exists()

@@ -200,11 +200,15 @@ def _check_foreign_checkpoint(path: Path, p: Params, overwrite: bool) -> None:
         return
     from .checkpoint import Checkpoint
 
-    what = Checkpoint(path, p.run_id).foreign()
+    ckpt = Checkpoint(path, p.run_id)
+    what = ckpt.foreign()
     if what is None:
         return                            # none, or this run's: the run continues from it
-    raise OutputError(f"checkpoint: {path} holds {what}; rerun that run's command to continue it, or pass "
-                      "--overwrite to discard it")
+    # a damaged file of this very run was told "rerun that run's command": the one just given
+    advice = ("rerun that run's command to continue it, or pass --overwrite to discard it" if ckpt.saved_run_id()
+              else "no run can continue from it (damaged, or not a checkpoint): pass --overwrite to discard "
+                   "it, or move it away")
+    raise OutputError(f"checkpoint: {path} holds {what}; {advice}")
 
 
 def checkpoint_path_for(curve_path: Path) -> Path:

@@ -171,7 +171,7 @@ def _checkpoint(p: Params, path, every: float, replace: bool) -> Checkpoint:
     what = None if replace else ckpt.foreign()
     if what is not None:
         raise ParameterError(f"checkpoint: {ckpt.path} holds {what}; it is left alone: delete it, give "
-                             "another path, or replace_checkpoint=True to replace it")
+                             "another path, or replace_checkpoint=True (tfm run: --overwrite) to replace it")
     try:
         ckpt.path.parent.mkdir(parents=True, exist_ok=True)
         # a folder that cannot take the file failed at the first save, ten minutes in
