@@ -125,9 +125,13 @@ def test_ctrl_c_saves_the_step_in_progress(reference, tmp_path, capsys, at):
     assert meta["steps"] == steps
     assert meta["phase"] == ("done" if at == "last" else "load" if steps <= N_LOAD else "unload")
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler    # handler restored
+    first = meta["started_at"]
     res = simulate(P, checkpoint=path)
     assert res.provenance["resumed_at_step"] == steps and not path.exists()
     assert_same_run(res, reference)
+    # the run's start, not the resuming process's (it said when the run was resumed)
+    assert res.provenance["started_at"] == first and first is not None
+    assert res.provenance["numba_threads"] >= 1       # a single run records its threads too
 
 
 def test_sigterm_saves_the_step_in_progress_then_ends_the_process(tmp_path):

@@ -158,6 +158,7 @@ class Checkpoint:
         self.set_aside = None      # why a checkpoint found here was not used
         self.save_when_done = False  # also save the finished curve (phase DONE)
         self.failed_saves = 0      # saves that could not be written (try_save)
+        self.started_at = None     # when the run first started (saved; a resumed run keeps it)
 
     # ---- reading -------------------------------------------------------------
     def saved_run_id(self) -> str | None:
@@ -203,6 +204,7 @@ class Checkpoint:
                      for i in range(len(cols["step"]))]
         carried = {name: _unflatten(name, value, arrays) for name, value in meta["carried"].items()}
         self.resumed_at = len(out.steps)
+        self.started_at = meta.get("started_at", self.started_at)    # the first process's start
         return Resume(carried, out, meta["phase"], int(meta["j"]), float(meta["elapsed"]))
 
     def _refuse(self, why: str) -> None:
@@ -245,6 +247,7 @@ class Checkpoint:
         counters = {f.name: getattr(out, f.name) for f in fields(out) if f.name != "steps"}
         meta = {"format": FORMAT, "run_id": self.run_id, "code": code_hash(), "phase": phase, "j": int(j),
                 "steps": len(out.steps), "elapsed": float(elapsed), "counters": counters, "carried": carried,
+                "started_at": self.started_at,
                 "written_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
         arrays["meta"] = np.array(json.dumps(meta))
         self.path.parent.mkdir(parents=True, exist_ok=True)

@@ -75,6 +75,8 @@ def loaded_commit() -> str | None:
 
 def provenance() -> dict[str, Any]:
     import numba
+
+    from .config import fft_workers
     import numpy as np
     import scipy
     return {
@@ -88,6 +90,9 @@ def provenance() -> dict[str, Any]:
         "scipy_version": scipy.__version__,
         "host": platform.node(),
         "started_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        # the threads it ran on (a campaign's worker says its own, with its executor)
+        "numba_threads": numba.get_num_threads(),
+        "fft_workers": fft_workers(),
     }
 
 

@@ -100,6 +100,8 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     for note in notes:
         warnings.warn(f"run {p.run_id}: {note}", RunWarning, stacklevel=2)
     prov = provenance()
+    if ckpt is not None:
+        ckpt.started_at = prov["started_at"]     # a saved state brings its own (protocol.run loads it)
     # an SI record is solved as its paper-units twin (tfm.units, L* = 1 m), then scaled back
     q = to_paper(p)
     # Ctrl-C while the compiled kernels load from Numba's cache was swallowed by a ctypes
@@ -151,6 +153,8 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
     # a resumed run says so: the steps before this one were computed by an earlier process
     prov["resumed_at_step"] = (ckpt.resumed_at or 0) if ckpt is not None else 0
+    if ckpt is not None and ckpt.resumed_at:
+        prov["started_at"] = ckpt.started_at     # when the run first started, not this process
     # always present (empty when none), so that every campaign table has the column
     prov["checkpoint_set_aside"] = (ckpt.set_aside or "") if ckpt is not None else ""
     if ckpt is not None and not keep_checkpoint:
