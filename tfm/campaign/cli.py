@@ -129,8 +129,9 @@ def cmd_status(args) -> int:
     if holder:
         print(f"  {holder} is running this campaign now: the tables are rebuilt when it finishes")
     elif (st.done or st.failed) and not store.tables_current(spec, st):
-        print(f"  the tables (summary, curves, failures) do not hold these runs yet (the campaign "
-              f"process stopped before it rebuilt them): `{store.run_command(args.file)}` rebuilds them")
+        print(f"  the tables (summary, curves, failures) may not hold these runs as stored (the campaign "
+              f"process stopped before it rebuilt them, or the run files were copied without their times): "
+              f"`{store.run_command(args.file)}` rebuilds them")
     saved = _checkpoints(store, st.pending + st.failed)
     if saved:
         print(f"  {len(saved)} unfinished runs have a checkpoint: they continue from it")

@@ -350,13 +350,15 @@ class CampaignStore:
         return self._tables_current(self._record(spec, status or self.status(spec)))
 
     def _files_digest(self, status: Status) -> str:
-        """A digest of the run and failure files as they are now: identity, size and mtime
-        (one stat each, no reading; every write replaces the file by a new one)."""
+        """A digest of the run and failure files as they are now: size and mtime (one stat
+        each, no reading; every write replaces the file by a new one, with a new mtime).
+        Not the inode: a copy kept with its times (cp -a, rsync -a, a backup) was called
+        stale."""
         digest = hashlib.sha256()
         for path in [self.run_path(r) for r in status.done] + [self.failure_path(r) for r in status.failed]:
             try:
                 st = path.stat()
-                digest.update(f"{path.name} {st.st_ino} {st.st_size} {st.st_mtime_ns}\n".encode())
+                digest.update(f"{path.name} {st.st_size} {st.st_mtime_ns}\n".encode())
             except OSError:
                 digest.update(f"{path.name} missing\n".encode())
         return digest.hexdigest()
