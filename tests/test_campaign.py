@@ -1085,3 +1085,23 @@ def test_a_copy_of_a_campaign_with_its_times_is_current(tmp_path, capsys):
     shutil.copytree(root, copy, copy_function=shutil.copy2)          # times kept, new inodes
     store = CampaignStore(copy)
     assert store.tables_current(spec)
+
+
+def test_a_dask_campaign_without_workers_says_so(tmp_path, monkeypatch, capsys):
+    """Every worker killed: the tasks waited for one, and the campaign with them, in silence
+    (80 s at 2/6 in a user's try, until Ctrl-C). Now it says so, and Ctrl-C still stops it."""
+    import threading
+
+    import tfm.campaign.runner as runner
+
+    distributed = pytest.importorskip("distributed")
+    monkeypatch.setattr(runner, "NO_WORKERS_NOTE", 0.5)
+    with distributed.LocalCluster(n_workers=0, processes=False, protocol="tcp", dashboard_address=None) as cluster:
+        timer = threading.Timer(3.0, os.kill, (os.getpid(), signal.SIGINT))
+        timer.start()
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                run_campaign(SMOKE, scheduler=cluster.scheduler_address, quiet=True, results_dir=tmp_path)
+        finally:
+            timer.cancel()
+    assert "no Dask worker has been connected to tcp://" in capsys.readouterr().err

@@ -82,6 +82,7 @@ class _Stop:
 
 
 POLL = 0.2      # seconds between looks at a stop request while waiting for runs
+NO_WORKERS_NOTE = 30.0   # seconds without any Dask worker before the campaign says so
 
 
 def available_cores() -> int:
@@ -620,12 +621,23 @@ def _run_dask(todo: list[Run], client,
                for run in todo}
     stop = stop or _Stop()
     seen = set()
+    alone_since, said = None, False
     try:
         finished = dask_completed(list(futures))
         while not finished.is_empty() and stop.signum is None:
             batch = finished.next_batch(block=False)
             if not batch:
                 time.sleep(POLL)          # short naps: a stop request is seen at once
+                # every worker gone: the tasks wait for one, and the campaign waited in silence
+                if not said and not client.scheduler_info().get("workers"):
+                    alone_since = alone_since or time.monotonic()
+                    if time.monotonic() - alone_since >= NO_WORKERS_NOTE:
+                        said = True
+                        print(f"tfm: no Dask worker has been connected to {client.scheduler.address} for "
+                              f"{NO_WORKERS_NOTE:g} s; the campaign waits for one (Ctrl-C stops it; the runs "
+                              "stored so far stay)", file=sys.stderr, flush=True)
+                else:
+                    alone_since = None
             for fut in batch:
                 try:
                     outcome = fut.result()
