@@ -368,3 +368,11 @@ def test_running_out_of_memory_mid_run_is_a_message_not_a_traceback(tmp_path, mo
                  "--step", "1e-3", "--no-plot", "-o", str(tmp_path / "r.parquet")]) == 1
     err = capsys.readouterr().err
     assert "tfm: error: out of memory" in err and "Traceback" not in err
+
+
+def test_the_memory_estimate_counts_field_snapshots():
+    """Snapshots keep three O(N) event candidates and HDF5 buffers: 57 bytes a spring more
+    in a user's measurement, which the estimate left out."""
+    p = Params(spacing=1 / 512, extent=1.0, f_th=0.0, max_indent=0.01, step=1e-3, shape="paraboloid")
+    extra = guards.estimate_memory(p.replace(snapshots="events")) - guards.estimate_memory(p)
+    assert extra == guards.BYTES_PER_SNAPSHOT_SPRING * guards.n_springs(p) >= 57 * guards.n_springs(p)

@@ -133,6 +133,10 @@ BYTES_PER_FIELD_CELL = 4.0
 # pairs, distances, both directions and a sort order): 68 bytes per directed entry,
 # measured at spacing 1/64 with 32 and 64 rings (769 and 1313 MiB peak), 2026-11-24.
 BYTES_PER_NEIGHBOUR = 70.0
+# field snapshots: three event candidates (F, u, state: 17 bytes each), the contact
+# history and HDF5's chunk buffers; a user measured 57 bytes a spring more with
+# --snapshots events (1/512, extent 1: 511 -> 569 MiB peak), 2026-11-25
+BYTES_PER_SNAPSHOT_SPRING = 64.0
 BASELINE_BYTES = 450e6     # measured 238 to 420 MiB after imports (and compilation)
 
 
@@ -143,7 +147,7 @@ def estimate_memory(p) -> float:
     solver's work vectors; the tree's keys and nodes), plus for the FFT operator the
     full-grid symbol on the padded P x P box (P = fast size >= 2n - 1: the kernel, its
     real transform and the preconditioner's inverse kernel) and the symbols of the field's smaller boxes,
-    plus the Python/NumPy/SciPy/Numba runtime.
+    plus the field snapshots' buffers, plus the Python/NumPy/SciPy/Numba runtime.
     """
     n = n_springs(p)
     total = BASELINE_BYTES + BYTES_PER_SPRING[p.operator] * n
@@ -153,6 +157,8 @@ def estimate_memory(p) -> float:
         total += BYTES_PER_FFT_CELL * P * P
         rungs = {_next_fast_len(math.ceil(f * P)) for f in FIELD_BOX_FRACTIONS}
         total += BYTES_PER_FIELD_CELL * sum(Q * Q for Q in rungs if Q < P)
+    if p.snapshots != "none":
+        total += BYTES_PER_SNAPSHOT_SPRING * n
     if p.operator == "tree" and p.kernel == "neighbors":     # pi m^2 neighbours per spring
         total += BYTES_PER_NEIGHBOUR * n * min(n, math.pi * (p.neighbor_rings + 0.5) ** 2)
     return total
