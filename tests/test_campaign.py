@@ -24,7 +24,7 @@ from tfm.campaign import (CampaignError, CampaignStore, load_failures, load_spec
                           run_campaign, spec_from_dict)
 from tfm.cli import main as tfm_main
 from tfm.config import SCHEMA_VERSION
-from tfm.params import Params
+from tfm.params import ParameterWarning, Params
 from tfm.results import CURVE_COLUMNS, read_metadata
 
 REPO = Path(__file__).resolve().parents[1]
@@ -1105,3 +1105,16 @@ def test_a_dask_campaign_without_workers_says_so(tmp_path, monkeypatch, capsys):
         finally:
             timer.cancel()
     assert "no Dask worker has been connected to tcp://" in capsys.readouterr().err
+
+
+def test_a_base_key_that_applies_to_no_run_is_warned_about_once(tmp_path):
+    """theta in [base] with the FFT operator: 'given but has no effect' came once per run
+    (N lines for N runs). Now once, naming the runs; a warning of one run still names it."""
+    path = tmp_path / "t.toml"
+    path.write_text('name = "t"\n[base]\nspacing = "1/16"\nk_th = 0.02\nmax_indent = 0.01\nstep = 1e-3\n'
+                    'theta = 0.5\nallow = "coarse"\n[sweep]\nalpha = [0.5, 0.75, 1.0]\n')
+    with pytest.warns(ParameterWarning) as caught:
+        load_spec(path)
+    texts = [str(w.message) for w in caught if "theta" in str(w.message)]
+    assert texts == [f"{path}: runs 0, 1, 2 (3 of 3): theta: given but has no effect; it applies only when "
+                     "operator='tree' and kernel='boussinesq'"]

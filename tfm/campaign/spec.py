@@ -205,6 +205,8 @@ def _expand(base, sweep, zips, where):
     kernels_checked: dict[tuple, str | None] = {}     # kernel_check_key -> refusal, if any
     axes = [[{k: v} for v in values] for k, values in sweep.items()]
     axes += [[dict(zip(group, values)) for values in zip(*group.values())] for group in zips]
+    # a [base] key said the same for every run, once per run; said once, naming the runs
+    said: dict[str, list[tuple[int, str]]] = {}
     for index, combo in enumerate(itertools.product(*axes)):
         swept: dict[str, Any] = {}
         for part in combo:
@@ -212,13 +214,19 @@ def _expand(base, sweep, zips, where):
         values = {**base, **swept}           # "none" is read by Params.from_dict (params.NONE_WORDS)
         label = f"{where}: run {index} {_label(swept)}".rstrip()
         try:
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", ParameterWarning)
                 # a swept or zipped list gives every run a value: the default value there
                 # says "not used in this run", so only [base] keys warn
                 for key in swept:
                     warnings.filterwarnings("ignore", message=f".*: {re.escape(key)}: given but",
                                             category=ParameterWarning)
                 params = Params.from_dict(values, where=label)
+            for w in caught:
+                if issubclass(w.category, ParameterWarning):
+                    said.setdefault(str(w.message).removeprefix(f"{label}: "), []).append((index, label))
+                else:
+                    warnings.warn(w.message, w.category, stacklevel=2)
             notes = tuple(check(params, memory=False))
             _check_kernel(params, kernels_checked)
         except GuardError as exc:
@@ -226,6 +234,13 @@ def _expand(base, sweep, zips, where):
         except ParameterError as exc:
             raise CampaignError(str(exc)) from None
         yield Run(index=index, params=params, swept=swept, notes=notes)
+    for text, runs in said.items():
+        if len(runs) == 1:
+            warnings.warn(f"{runs[0][1]}: {text}", ParameterWarning, stacklevel=3)
+        else:
+            which = ", ".join(str(i) for i, _ in runs[:8]) + (", ..." if len(runs) > 8 else "")
+            warnings.warn(f"{where}: runs {which} ({len(runs)} of {index + 1}): {text}", ParameterWarning,
+                          stacklevel=3)
 
 
 def _check_kernel(params: Params, checked: dict) -> None:
