@@ -1118,3 +1118,17 @@ def test_a_base_key_that_applies_to_no_run_is_warned_about_once(tmp_path):
     texts = [str(w.message) for w in caught if "theta" in str(w.message)]
     assert texts == [f"{path}: runs 0, 1, 2 (3 of 3): theta: given but has no effect; it applies only when "
                      "operator='tree' and kernel='boussinesq'"]
+
+
+def test_status_names_checkpoints_of_runs_no_longer_in_the_file(tmp_path, capsys):
+    """A run removed from the campaign file while it had a checkpoint: the file stayed in
+    checkpoints/ for good, and status never mentioned it."""
+    root = run_campaign(SMOKE, quiet=True, results_dir=tmp_path)
+    store = CampaignStore(root)
+    store.checkpoints_dir.mkdir(exist_ok=True)
+    (store.checkpoints_dir / "0123456789abcdef.npz").write_bytes(b"PK")
+    capsys.readouterr()
+    assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert f"1 checkpoints in {store.checkpoints_dir} belong to runs no longer in the file (0123456789abcdef): " \
+           "they are kept" in out
