@@ -177,6 +177,8 @@ def test_units_parameters_sweep_in_a_campaign():
     (dict(k_th_coefficient="limit", kernel="neighbors"), "k_th_coefficient: 'limit' was measured with the boussinesq"),
     (dict(kernel="local"), "kernel: units='si' needs"),
     (dict(units="cgs"), "units: unknown value 'cgs'"),
+    # named in paper units (1.19e-10 for 5e-4 N) by the record's paper-units twin
+    (dict(max_load=5e-4), r"max_load: 0.0005 has no effect here; it applies only when control='force'"),
 ])
 def test_bad_unit_input_fails_early(changes, match):
     with pytest.raises(ParameterError, match=match):

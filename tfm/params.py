@@ -192,8 +192,10 @@ class Params:
         if self.max_indent == "auto" and self.units == "si":
             from .units import to_paper     # same lengths in paper units with L* = 1 m
             # no load_step: the preload does not depend on it, and the twin would check it
-            # in paper units (this record checks it in newtons)
-            return to_paper(self, load_step=None).delta_max
+            # in paper units (this record checks it in newtons); nor a max_load that does
+            # not apply (displacement control), which the twin refused in paper units
+            keep = {} if self.control == "force" else {"max_load": None}
+            return to_paper(self, load_step=None, **keep).delta_max
         if (self.max_indent == "auto" and getattr(self, "max_load", None) is not None
                 and self.control == "force"):        # elsewhere max_load is refused, not used
             from .theory import preload_indent
