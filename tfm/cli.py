@@ -346,11 +346,13 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="one loading-unloading curve (default: the paper's Fig. 3 case)",
                          description="Run one curve. Flags mirror the parameter names; fractions "
                                      "like 1/64 are accepted. Outputs are checked before the run; "
-                                     "nothing is replaced without --overwrite. Exit status 2: bad "
+                                     "nothing is replaced without --overwrite. Exit status 1: out of "
+                                     "memory, or an output not written after the run; 2: bad "
                                      "input or output; 3: a suspect run (grid edge reached, solver "
                                      "not converged, rounds or unloading steps capped, fewer springs "
                                      "in contact than a disc of radius 2 spacings, auto preload "
-                                     "capped); 130: interrupted.")
+                                     "capped, allowed past a guard, snapshots stopped early); 130: "
+                                     "interrupted.")
     _add_param_flags(run)
     run.add_argument("-o", "--output", default=None, metavar="FILE.parquet",
                      help="curve table (default results/runs/<run_id>/curve.parquet)")
