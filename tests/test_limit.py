@@ -5,6 +5,7 @@ The slow tier (test_limit_slow.py) fits real runs."""
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -375,3 +376,34 @@ def test_tfm_paper_exits_1_when_a_claim_does_not_hold(tmp_path, monkeypatch, cap
     err = capsys.readouterr().err
     assert "1 of the paper's claims do not hold here: Fig. 3 (the force turns tensile)" in err
     assert ("expected at --quick's doubled spacings" in err) == quick
+
+
+@pytest.mark.parametrize("damage, match", [
+    (lambda text: "", "cannot be read as a points table of tfm limit"),
+    (lambda text: text + text.splitlines()[50] + "\n", r"runs \['[0-9a-f]{16}'\] appear more than once"),
+    (lambda text: text.replace(text.splitlines()[1].split(",")[7], "x", 1),
+     "F_max must be a number > 0 on every row"),
+    (lambda text: text.replace("step_bound", "step_bnd", 1), r"not a points table of tfm limit \(missing \['step_bound'\]\)"),
+])
+def test_a_damaged_points_table_is_refused_by_name(tmp_path, monkeypatch, capsys, damage, match):
+    """A duplicated row of points.csv counted as a "deeper preload" pair of itself (preload
+    check 16240 %, exit 0); an empty file, a non-numeric F_max or a missing column gave
+    pandas' and Python's tracebacks."""
+    from tfm.cli import main
+    from tfm.paper.limit import DEFAULT_OUT, POINTS_FILE
+
+    monkeypatch.chdir(Path(__file__).parents[1])
+    out = tmp_path / "limit"
+    out.mkdir()
+    (out / POINTS_FILE).write_text(damage((Path(DEFAULT_OUT) / POINTS_FILE).read_text()))
+    assert main(["limit", "--analyse-only", "--results-dir", str(tmp_path / "results"), "--out", str(out),
+                 "-q"]) == 2
+    assert re.search(match, capsys.readouterr().err)
+
+
+def test_tfm_limit_out_that_is_a_file_is_refused(tmp_path, capsys):
+    from tfm.cli import main
+
+    (tmp_path / "x").write_text("")
+    assert main(["limit", "--analyse-only", "--out", str(tmp_path / "x")]) == 2
+    assert f"tfm: error: out: {tmp_path / 'x'} is a file, not a folder" in capsys.readouterr().err

@@ -103,12 +103,28 @@ POINT_COLUMNS = ("geometry", "run_id", "self_term", "spacing", "ratio", "max_ind
 def kept_points(path: Path, specs: dict) -> pd.DataFrame:
     """The kept points of ``path`` whose run ids the campaigns still list (others are
     dropped: the campaign changed), with their coefficients recomputed from F_max."""
+    from ..params import ParameterError
+
     if not path.exists():
         return pd.DataFrame(columns=POINT_COLUMNS)
-    kept = pd.read_csv(path, dtype={"run_id": str, "warnings": str, "source": str}, keep_default_na=False)
+    # a damaged table is refused by name: it gave pandas' and Python's tracebacks, and a
+    # duplicated row counted as a "deeper preload" pair of itself (a 16240 % preload check)
+    try:
+        kept = pd.read_csv(path, dtype={"run_id": str, "warnings": str, "source": str}, keep_default_na=False)
+    except (ValueError, UnicodeDecodeError, pd.errors.ParserError) as exc:     # EmptyDataError too
+        raise ParameterError(f"{path}: cannot be read as a points table of tfm limit ({exc})") from None
     missing = set(POINT_COLUMNS) - set(kept.columns)
     if missing:
-        raise ValueError(f"{path}: not a points table of tfm limit (missing {sorted(missing)})")
+        raise ParameterError(f"{path}: not a points table of tfm limit (missing {sorted(missing)})")
+    f_max = pd.to_numeric(kept["F_max"], errors="coerce")
+    if f_max.isna().any() or not (f_max > 0).all():
+        bad = kept["run_id"][f_max.isna() | ~(f_max > 0)].tolist()
+        raise ParameterError(f"{path}: F_max must be a number > 0 on every row; not on runs {bad[:5]}")
+    kept["F_max"] = f_max.astype(float)
+    twice = kept["run_id"][kept["run_id"].duplicated()].unique().tolist()
+    if twice:
+        raise ParameterError(f"{path}: runs {twice[:5]} appear more than once; a points table holds one "
+                             "row per run")
     runs = {run.run_id: (geometry, run) for geometry, spec in specs.items() for run in spec.runs}
     rows = []
     for row in kept.to_dict("records"):
@@ -588,12 +604,17 @@ def main_limit(args) -> int:
         if unused:
             raise ParameterError(f"analyse-only: {', '.join(unused)}: options of computing runs, and "
                                  "--analyse-only computes none (its fit covers every stored point); drop them")
+    out_dir = Path(args.out)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ParameterError(f"out: {out_dir} is a file, not a folder")
     t0 = time.perf_counter()
     start_load = machine()["load"][0]
     results_dir = Path(args.results_dir)
+    if args.analyse_only and not results_dir.is_dir():
+        print(f"[tfm limit] results-dir {results_dir} does not exist: only kept points are fitted",
+              file=sys.stderr)
     specs = {geometry: load_spec_for(stem) for geometry, stem in LIMIT_CAMPAIGNS}
     computed = 0
-    out_dir = Path(args.out)
     # the kept points travel with the report; a new --out starts from the default folder's
     source = out_dir / POINTS_FILE
     if not source.exists() and (Path(DEFAULT_OUT) / POINTS_FILE).exists():
@@ -616,7 +637,10 @@ def main_limit(args) -> int:
               f"and no kept point in {source}; run `tfm limit` to compute them", file=sys.stderr)
         return 1
     results = fit_all(points)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ParameterError(f"out: cannot make the folder {out_dir}: {exc.strerror or exc}") from None
     if len(points):
         write_points(out_dir / POINTS_FILE, points)
     if results:
