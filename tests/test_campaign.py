@@ -1132,3 +1132,25 @@ def test_status_names_checkpoints_of_runs_no_longer_in_the_file(tmp_path, capsys
     out = capsys.readouterr().out
     assert f"1 checkpoints in {store.checkpoints_dir} belong to runs no longer in the file (0123456789abcdef): " \
            "they are kept" in out
+
+
+def test_a_stopped_pool_worker_removes_its_temporary_snapshot_files(tmp_path):
+    """Ctrl-C on a campaign with snapshots: the pool's SIGTERM killed the workers mid-run,
+    and their snapshot files (the temporary one and the hidden .tmp being written, 4.9 MB
+    each at 1/256) stayed in the temporary folder for an hour."""
+    import subprocess
+    import sys
+
+    code = ("import os, signal, tempfile; tempfile.tempdir = os.environ['TMPDIR_TEST']\n"
+            "from tfm.campaign.runner import _pool_init\n"
+            "from tfm.snapshots import LIVE_TEMPORARIES, temporary_fields_path\n"
+            "_pool_init(1)\n"
+            "path = temporary_fields_path(); tmp = path.with_name('.' + path.name + '.1.tmp')\n"
+            "tmp.write_bytes(b'half'); LIVE_TEMPORARIES.add(tmp)\n"
+            "print(path, tmp, flush=True)\n"
+            "os.kill(os.getpid(), signal.SIGTERM)\n"
+            "import time; time.sleep(5); print('alive')\n")
+    env = dict(os.environ, TMPDIR_TEST=str(tmp_path))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
+    assert proc.returncode == -signal.SIGTERM and "alive" not in proc.stdout
+    assert proc.stdout.split() and not list(tmp_path.iterdir())

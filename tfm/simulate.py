@@ -149,6 +149,10 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
             if own_path:
                 Path(fields_path).unlink(missing_ok=True)
         raise
+    finally:
+        if writer is not None:
+            from .snapshots import LIVE_TEMPORARIES
+            LIVE_TEMPORARIES.discard(Path(fields_path))    # the result's from here on
     if summary["warnings"]:
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
     # a resumed run says so: the steps before this one were computed by an earlier process

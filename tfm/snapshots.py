@@ -52,13 +52,30 @@ CF_UNITS = {"paper": ("L*", "F*", "L*^2"), "si": ("m", "N", "m^2")}
 DISK_RESERVE = 64 * 2**20
 
 
+# Temporary files this process is writing now (a run's snapshots in the temporary folder
+# and the hidden .tmp a writer streams to): a campaign's pool worker stopped by SIGTERM
+# removes them before it dies (tfm.campaign.runner); they stayed in /tmp for an hour.
+LIVE_TEMPORARIES: set[Path] = set()
+
+
+def remove_live_temporaries() -> None:
+    for path in list(LIVE_TEMPORARIES):
+        try:
+            path.unlink()
+        except OSError:
+            pass
+        LIVE_TEMPORARIES.discard(path)
+
+
 def temporary_fields_path() -> Path:
     """A new file in the temporary folder for a run's snapshots (moved beside its table
     when that is written), named with this process's pid so that the files of a killed
-    process can be told from a running one's (remove_dead_temporary_fields)."""
+    process can be told from a running one's (remove_dead_temporary_fields). Listed in
+    LIVE_TEMPORARIES until its run ends (tfm.simulate)."""
     remove_dead_temporary_fields()
     fd, name = tempfile.mkstemp(prefix=f"tfm-{os.getpid()}-", suffix=".fields.nc")
     os.close(fd)
+    LIVE_TEMPORARIES.add(Path(name))
     return Path(name)
 
 
@@ -104,6 +121,7 @@ class SnapshotWriter:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        LIVE_TEMPORARIES.add(self._tmp)
         self.every = p.snapshots if isinstance(p.snapshots, int) else None
         self.grid = layout.shape
         self._index: dict[int, int] = {}        # step -> position along the step dimension
@@ -265,6 +283,7 @@ class SnapshotWriter:
             self._f.attrs["summary"] = json.dumps(summary, sort_keys=True, default=_json_default)
         self._f.close()
         os.replace(self._tmp, self.path)
+        LIVE_TEMPORARIES.discard(self._tmp)
         return self.path
 
     def abort(self) -> None:
@@ -272,6 +291,7 @@ class SnapshotWriter:
             self._f.close()
         finally:
             self._tmp.unlink(missing_ok=True)
+            LIVE_TEMPORARIES.discard(self._tmp)
 
 
 # ---- reading (no xarray needed; xarray users: xr.open_dataset(path)) -------------
