@@ -1041,6 +1041,7 @@ def test_runs_removed_from_the_file_are_reported_not_dropped_silently(tmp_path, 
     assert tfm_main(["campaign", "run", str(toml), *args]) == 0
     err = capsys.readouterr().err
     assert "1 stored run in" in err and "is not in the campaign file now" in err
+    assert "or a height map's content changed" in err   # the other way a run id leaves the file
     store = CampaignStore.for_spec(load_spec(toml), tmp_path)
     assert len(store.load("summary")) == 1                    # the tables follow the file
     assert len(list(store.runs_dir.glob("*.parquet"))) == 2   # and the removed run is kept

@@ -283,9 +283,9 @@ class CampaignStore:
             return None
         n = len(status.extra)
         return (f"{n} stored run{'s' if n > 1 else ''} in {self.root} {'are' if n > 1 else 'is'} not in the "
-                f"campaign file now (values removed from it?): kept on disk in {self.runs_dir.name}/ or "
-                f"{self.failures_dir.name}/, left out of the tables; put the values back to have them in the "
-                "tables again")
+                f"campaign file now (values removed from it, or a height map's content changed: its hash is "
+                f"in the run id?): kept on disk in {self.runs_dir.name}/ or {self.failures_dir.name}/, left out "
+                "of the tables; put the values (or the map) back to have them in the tables again")
 
     # ---- campaign tables ---------------------------------------------------
     def write_tables(self, spec: CampaignSpec, status: Status | None = None) -> bool:
