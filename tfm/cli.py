@@ -231,9 +231,10 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
 
     if not args.quiet:
         body = f"map={Path(p.height_map).name}" if p.shape == "height_map" else f"R={p.radius:g}"
+        n_load = n_loading_steps(p)
         print(f"tfm run {p.run_id}: spacing={p.spacing:.6g} F_th={p.threshold_force:.4g} "
               f"{body} shape={p.shape} kernel={p.kernel} operator={p.operator} "
-              f"max_indent={p.delta_max:.4g} ({n_loading_steps(p)} loading steps), "
+              f"max_indent={p.delta_max:.4g} ({n_load} loading step{'' if n_load == 1 else 's'}), "
               f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
         if p.shape == "height_map" and p.extent is None:
             from .surfaces import map_unused_note
