@@ -737,3 +737,14 @@ def test_a_figure_that_cannot_be_written_keeps_the_table_and_the_summary(tmp_pat
     assert f"tfm: error: the figure {tmp_path / 'r.png'} could not be written (No space left on device); the " \
            f"table {out} is" in captured.err
     assert out.exists() and not (tmp_path / "r.png").exists() and '"pull_off_force"' in captured.out
+
+
+def test_a_note_stated_before_the_run_is_not_repeated_after_it(tmp_path, capsys):
+    """An allowed guard or a capped preload was printed before the run and again, in the
+    summary's warnings, after it. Still exit 3, the reason said once."""
+    from tfm.cli import main
+
+    assert main(["run", "--spacing", "1/16", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.01",
+                 "--step", "1e-3", "--allow", "coarse", "--no-plot", "-o", str(tmp_path / "r.parquet")]) == 3
+    err = capsys.readouterr().err
+    assert err.count("allowed past the 'coarse' guard") == 1

@@ -335,8 +335,11 @@ def cmd_run(args) -> int:
                          indent=1, allow_nan=False))
         print(f"wrote {out}" + ("" if plot_path is None else f" and {plot_path}")
               + (f" and {res.fields_path}" if res.fields_path else ""), file=sys.stderr)
-    if s["warnings"]:
-        print(f"tfm: warning: {s['warnings']}", file=sys.stderr)
+    # the notes were stated before the run (and open the summary's warnings): the rest only
+    said = "; ".join(notes)
+    rest = s["warnings"][len(said):].lstrip("; ") if said and s["warnings"].startswith(said) else s["warnings"]
+    if rest:
+        print(f"tfm: warning: {rest}", file=sys.stderr)
     return 1 if figure_lost else 3 if s["warnings"] else 0
 
 
