@@ -363,13 +363,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--plot", default=None, metavar="FILE.png",
                      help="the plot (.png, .pdf, .svg; default: beside the table, as .png)")
     run.add_argument("--overwrite", action="store_true", help="replace existing output files")
-    run.add_argument("--no-plot", action="store_true")
+    run.add_argument("--no-plot", action="store_true", help="write the table only, no figure")
     run.add_argument("--checkpoint-every", type=float, default=None, metavar="SECONDS",
                      help="save the running curve's state this often beside the table "
                           "(<stem>.checkpoint.npz), so that the same command continues a killed run "
                           "(default 600 for displacement control without snapshots)")
     run.add_argument("--no-checkpoints", action="store_true", help="save no checkpoint")
-    run.add_argument("-q", "--quiet", action="store_true")
+    run.add_argument("-q", "--quiet", action="store_true",
+                     help="no header, progress, summary or 'wrote' line: warnings and errors only")
     run.set_defaults(func=cmd_run)
     from .campaign.cli import register
     register(sub)

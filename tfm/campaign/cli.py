@@ -32,7 +32,8 @@ def register(subparsers) -> None:
     run.add_argument("--skip-failed", action="store_true",
                      help="do not retry runs that failed before")
     run.add_argument("--rerun-stale", action="store_true",
-                     help="recompute runs stored by another tfm version or git commit")
+                     help="recompute runs stored by other tfm source code (their prov_code_hash, a hash of "
+                          "the files of tfm/, differs from this code's)")
     run.add_argument("--where", action="append", default=[], metavar="KEY=VALUE",
                      help="compute only the runs with this parameter value, e.g. self_term=3.8 or "
                           "spacing=1/1340 (repeat to combine); the rest stay pending")

@@ -105,9 +105,9 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
     ``jobs`` > 1 uses a local process pool; ``scheduler`` (an address such as
     ``tcp://host:8786``, or a ``distributed.Client``) runs on a Dask cluster instead.
     Finished runs are skipped, so calling it again after a crash resumes the campaign.
-    Failed runs are tried again unless ``retry_failed=False``. Runs stored by another
-    tfm version or commit are kept (with a warning) unless ``rerun_stale=True``: the run id
-    hashes the parameters, not the code. ``only`` (run ids or runs, e.g. from select_runs) limits
+    Failed runs are tried again unless ``retry_failed=False``. Runs stored by other
+    tfm source code (prov_code_hash) are kept (with a warning) unless ``rerun_stale=True``:
+    the run id hashes the parameters, not the code. ``only`` (run ids or runs, e.g. from select_runs) limits
     what is computed now; the campaign tables still cover every stored run.
 
     On this machine (serial or process pool) a displacement-controlled run without field
