@@ -1155,3 +1155,14 @@ def test_a_stopped_pool_worker_removes_its_temporary_snapshot_files(tmp_path):
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=60)
     assert proc.returncode == -signal.SIGTERM and "alive" not in proc.stdout
     assert proc.stdout.split() and not list(tmp_path.iterdir())
+
+
+def test_a_campaign_whose_height_map_is_gone_says_why_it_needs_it(tmp_path, capsys):
+    """`tfm campaign status` of a campaign whose map was moved said only "no such file",
+    and a user could not see why a status needs the map at all."""
+    path = tmp_path / "hm.toml"
+    path.write_text('name = "hm"\n[base]\nspacing = "1/32"\nshape = "height_map"\nheight_map = "gone.npy"\n'
+                    'map_pixel_size = "1/32"\nf_th = 0\nmax_indent = 0.01\nstep = 1e-3\n')
+    assert tfm_main(["campaign", "status", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "height_map: no such file" in err and "a campaign needs its height maps to know its runs" in err

@@ -232,7 +232,11 @@ def _expand(base, sweep, zips, where):
         except GuardError as exc:
             raise CampaignError(f"{label}: {exc}") from None
         except ParameterError as exc:
-            raise CampaignError(str(exc)) from None
+            # status, too, needs the map: its content hash is part of each run id
+            hint = ("; a campaign needs its height maps to know its runs (a map's content hash is part of "
+                    "each run id): restore the file, or point height_map at where it is now"
+                    if "height_map: no such file" in str(exc) else "")
+            raise CampaignError(f"{exc}{hint}") from None
         yield Run(index=index, params=params, swept=swept, notes=notes)
     for text, runs in said.items():
         if len(runs) == 1:
