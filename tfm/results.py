@@ -90,7 +90,7 @@ def provenance() -> dict[str, Any]:
         "scipy_version": scipy.__version__,
         "host": platform.node(),
         "started_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        # the threads it ran on (a campaign's worker says its own, with its executor)
+        # the threads it ran on (in a campaign, those of the worker that computed it)
         "numba_threads": numba.get_num_threads(),
         "fft_workers": fft_workers(),
     }

@@ -302,10 +302,7 @@ def execute(params, executor: str = "serial", ckpt=None) -> Outcome:
     """Simulate one run; never raises, so one bad run cannot stop the campaign. ``ckpt``:
     (the CampaignStore, seconds) of the run's checkpoint, for the runs that can have one."""
     try:
-        import numba
-
         from ..checkpoint import CheckpointWarning
-        from ..config import fft_workers
         from ..simulate import RunWarning, simulate
 
         with warnings.catch_warnings():
@@ -313,8 +310,7 @@ def execute(params, executor: str = "serial", ckpt=None) -> Outcome:
             # the provenance holds it, and the campaign process says it (_consume)
             warnings.simplefilter("ignore", CheckpointWarning)
             result = simulate(params, **_checkpoint_args(params, ckpt))
-        result.provenance.update(numba_threads=numba.get_num_threads(), fft_workers=fft_workers(),
-                                 executor=executor)
+        result.provenance["executor"] = executor    # its threads: tfm.results.provenance, in this worker
         return Outcome(result=result)
     except Exception as exc:
         return Outcome(error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc())
