@@ -136,10 +136,10 @@ def cmd_status(args) -> int:
     saved = _checkpoints(store, st.pending + st.failed)
     if saved:
         print(f"  {len(saved)} unfinished runs have a checkpoint: they continue from it")
-    orphans = _orphan_checkpoints(store, {run.run_id for run in spec.runs})
+    orphans = store.orphan_checkpoints(spec)
     if orphans:
         print(f"  {len(orphans)} checkpoints in {store.checkpoints_dir} belong to runs no longer in the file "
-              f"({', '.join(sorted(orphans)[:3])}{', ...' if len(orphans) > 3 else ''}): they are kept; put the "
+              f"({', '.join(orphans[:3])}{', ...' if len(orphans) > 3 else ''}): they are kept; put the "
               "values back to continue them, or delete them")
     state = {**{r: "pending" for r in st.pending}, **{r: "done" for r in st.done},
              **{r: "flagged" for r in st.flagged}, **{r: "failed" for r in st.failed}}
@@ -153,14 +153,6 @@ def cmd_status(args) -> int:
                 line += f"  [{saved[rid]}]"
             print(line)
     return 1 if st.failed else 0
-
-
-def _orphan_checkpoints(store, run_ids: set[str]) -> list[str]:
-    """Run ids of the checkpoints whose runs the campaign file no longer holds (an edit
-    removed their values): nothing would ever continue or remove them, and status was silent."""
-    if not store.checkpoints_dir.is_dir():
-        return []
-    return [path.stem for path in store.checkpoints_dir.glob("*.npz") if path.stem not in run_ids]
 
 
 def _checkpoints(store, run_ids) -> dict[str, str]:

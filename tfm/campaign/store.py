@@ -270,12 +270,18 @@ class CampaignStore:
                 pending.append(rid)
         return Status(done, failed, pending, flagged, stale, self._not_in(spec))
 
-    def _not_in(self, spec: CampaignSpec) -> list[str]:
-        """Run ids stored here (run files, failure records) that ``spec`` does not expand to."""
+    def _not_in(self, spec: CampaignSpec, where=None) -> list[str]:
+        """Run ids stored here that ``spec`` does not expand to: in ``where``, (folder, glob)
+        pairs, by default the run files and failure records."""
+        where = where or ((self.runs_dir, "*.parquet"), (self.failures_dir, "*.json"))
         ids = {r.run_id for r in spec.runs}
-        found = {p.stem for d, pat in ((self.runs_dir, "*.parquet"), (self.failures_dir, "*.json"))
-                 if d.is_dir() for p in d.glob(pat) if not p.name.startswith(".")}
+        found = {p.stem for d, pat in where if d.is_dir() for p in d.glob(pat) if not p.name.startswith(".")}
         return sorted(found - ids)
+
+    def orphan_checkpoints(self, spec: CampaignSpec) -> list[str]:
+        """Run ids of the checkpoints whose runs ``spec`` no longer holds (an edit removed
+        their values): nothing would ever continue or remove them."""
+        return self._not_in(spec, ((self.checkpoints_dir, "*.npz"),))
 
     def extra_note(self, status: Status) -> str | None:
         """What to say about stored runs the campaign file no longer has, if any."""
