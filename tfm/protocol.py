@@ -51,19 +51,18 @@ def run(p, prob: Problem, observe: Observer | None = None, checkpoint=None) -> C
     and continues from a saved state."""
     n_load = n_loading_steps(p)
     max_unload = p.max_unload_steps or (20 * n_load + 1000)
-    if checkpoint is not None:
-        if p.control == "force":
-            raise ValueError("checkpoint: force control is not checkpointed")
-        return displacement_control(prob, p.delta_max, p.step, max_unload, observe, checkpoint)
-    # Nothing to save, but a signal still waits for the end of the step in progress: raised
-    # inside a compiled call's argument handling it came out as a TypeError, and inside a
-    # snapshot's write it could leave the stream half written. A second signal acts at once.
-    stop = StopRequest(None)
+    if checkpoint is not None and p.control == "force":
+        raise ValueError("checkpoint: force control is not checkpointed")
+    # SIGINT and SIGTERM wait for the end of the step in progress, where a checkpointed run
+    # saves it first (displacement_control). A run without a checkpoint stops there too:
+    # raised inside a compiled call's argument handling the signal came out as a TypeError,
+    # and inside a snapshot's write it could leave the stream half written.
+    stop = StopRequest(checkpoint.path if checkpoint is not None else None)
 
     def observe_then_stop(state, rec):
         if observe is not None:
             observe(state, rec)
-        if stop.pending:
+        if stop.pending and checkpoint is None:
             stop.deliver()
 
     with stop.installed():
@@ -71,8 +70,8 @@ def run(p, prob: Problem, observe: Observer | None = None, checkpoint=None) -> C
             out = force_control(prob, p.peak_load, p.load_decrement, p.step, max_unload, observe_then_stop,
                                 depth=p.delta_max)
         else:
-            out = displacement_control(prob, p.delta_max, p.step, max_unload, observe_then_stop)
-        if stop.pending:
+            out = displacement_control(prob, p.delta_max, p.step, max_unload, observe_then_stop, checkpoint, stop)
+        if stop.pending and checkpoint is None:
             stop.deliver()
     return out
 
@@ -84,11 +83,12 @@ def n_loading_steps(p) -> int:
 
 
 def displacement_control(prob: Problem, delta_max: float, step: float, max_unload_steps: int,
-                         observe: Observer | None = None, checkpoint=None) -> CurveResult:
+                         observe: Observer | None = None, checkpoint=None, stop=None) -> CurveResult:
     """Load from d = 0 to d = -delta_max in steps of ``step``, then unload until no spring
     is in contact (or max_unload_steps is reached, which is flagged). With a checkpoint,
     the state is saved after finished steps, and after the step in progress when SIGINT
-    or SIGTERM comes (tfm.checkpoint.StopRequest); a saved state is continued from."""
+    or SIGTERM comes (``stop``, a tfm.checkpoint.StopRequest the caller installed); a
+    saved state is continued from."""
     out = CurveResult()
     t0 = time.perf_counter()
     state = ContactState(prob)
@@ -108,7 +108,7 @@ def displacement_control(prob: Problem, delta_max: float, step: float, max_unloa
     if checkpoint is None:
         return _displacement_steps(state, out, first, n_load, delta_max, step, max_unload_steps,
                                    observe, lambda phase, j: None, t0, before)
-    stop = StopRequest(checkpoint.path)
+    stop = stop or StopRequest(checkpoint.path)      # not installed: no signal is waited for
 
     def done(phase, j):
         elapsed = before + time.perf_counter() - t0
@@ -119,13 +119,12 @@ def displacement_control(prob: Problem, delta_max: float, step: float, max_unloa
         else:
             checkpoint.step_done(state, out, phase, j, elapsed)
 
-    with stop.installed():
-        out = _displacement_steps(state, out, first, n_load, delta_max, step, max_unload_steps,
-                                  observe, done, t0, before)
-        if stop.pending:                 # it came during the last step: keep the whole curve
-            done(DONE, 0)
-        elif checkpoint.save_when_done:  # the caller stores the result, then removes it
-            checkpoint.try_save(state, out, DONE, 0, out.wall_time)
+    out = _displacement_steps(state, out, first, n_load, delta_max, step, max_unload_steps,
+                              observe, done, t0, before)
+    if stop.pending:                     # it came during the last step: keep the whole curve
+        done(DONE, 0)
+    elif checkpoint.save_when_done:      # the caller stores the result, then removes it
+        checkpoint.try_save(state, out, DONE, 0, out.wall_time)
     return out
 
 
