@@ -384,9 +384,9 @@ def _terminated(signum, frame) -> None:
     snapshot files of the run in progress, then end by SIGTERM as before. They stayed in
     the temporary folder for an hour (4.9 MB each at 1/256). A checkpointed run saves its
     step first (tfm.checkpoint.StopRequest), then passes the signal here."""
-    from ..snapshots import remove_live_temporaries
-
-    remove_live_temporaries()
+    snapshots = sys.modules.get("tfm.snapshots")     # no import in a handler: not loaded, no files
+    if snapshots is not None:
+        snapshots.remove_live_temporaries()
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     os.kill(os.getpid(), signal.SIGTERM)
 
