@@ -376,13 +376,18 @@ def unit_to_metres(unit: str | None, p) -> float:
     return _SI_UNITS[unit]
 
 
-def map_half_width(p, hm: HeightMap) -> float:
-    """Half-width of the largest centred square of springs the map covers."""
+def map_reach(p, hm: HeightMap) -> tuple[float, float]:
+    """How far a grid centred on the map's centre pixel ((n - 1) // 2 along each axis) can
+    reach along x and y: the shorter side of each axis (an even pixel count leaves its
+    last pixel over on one side)."""
     a = map_pixel(p, hm)
     nx, ny = hm.heights.shape
-    cx, cy = (nx - 1) // 2, (ny - 1) // 2
-    avail = min(cx, nx - 1 - cx, cy, ny - 1 - cy) * a
-    return math.floor(avail / p.spacing + 1e-9) * p.spacing
+    return min((nx - 1) // 2, nx - 1 - (nx - 1) // 2) * a, min((ny - 1) // 2, ny - 1 - (ny - 1) // 2) * a
+
+
+def map_half_width(p, hm: HeightMap) -> float:
+    """Half-width of the largest centred square of springs the map covers."""
+    return math.floor(min(map_reach(p, hm)) / p.spacing + 1e-9) * p.spacing
 
 
 def map_cropped_edge(p, x: np.ndarray, y: np.ndarray, edge: np.ndarray) -> np.ndarray:
@@ -390,16 +395,13 @@ def map_cropped_edge(p, x: np.ndarray, y: np.ndarray, edge: np.ndarray) -> np.nd
     short of the map's own edge, by ``extent`` or as the centred square of an oblong map.
     Contact there is a sign of a too-small grid, as for the other shapes; contact at the
     map's own edge is physical (a finite body), and is not flagged."""
-    hm = load_height_map(p.height_map)
-    a = map_pixel(p, hm)
-    nx, ny = hm.heights.shape
-    cx, cy = (nx - 1) // 2, (ny - 1) // 2
+    reach_x, reach_y = map_reach(p, load_height_map(p.height_map))
     hw = float(max(np.abs(x).max(), np.abs(y).max())) if x.size else 0.0
     near = 1.5 * p.spacing                                    # as wide as the ring (geometry)
     # another ring of springs fits on both sides: the grid is centred, so the row that an
     # even pixel count leaves over on one side is no crop a larger extent could undo
     cut = lambda room: room >= p.spacing * (1 - 1e-9)
-    cut_x, cut_y = cut(min(cx, nx - 1 - cx) * a - hw), cut(min(cy, ny - 1 - cy) * a - hw)
+    cut_x, cut_y = cut(reach_x - hw), cut(reach_y - hw)
     sides = ((cut_x, x >= hw - near), (cut_x, x <= -hw + near), (cut_y, y >= hw - near), (cut_y, y <= -hw + near))
     mask = np.zeros(x.shape, dtype=bool)
     for cropped, on_side in sides:
@@ -414,10 +416,9 @@ def map_unused_note(p) -> str | None:
     hm = load_height_map(p.height_map)
     a = map_pixel(p, hm)
     nx, ny = hm.heights.shape
-    # what a grid centred on the map could use: the shorter side of each axis (an even
-    # pixel count leaves a row over on one side, and the grid keeps whole spacings: a
-    # square map always leaves less than a spacing, which is not worth a note)
-    reach_x, reach_y = min((nx - 1) // 2, nx - 1 - (nx - 1) // 2) * a, min((ny - 1) // 2, ny - 1 - (ny - 1) // 2) * a
+    # the grid keeps whole spacings: a square map always leaves less than a spacing of its
+    # reach unused, which is not worth a note
+    reach_x, reach_y = map_reach(p, hm)
     hw = p.half_width
     if max(reach_x, reach_y) - hw >= p.spacing * (1 - 1e-9):
         return (f"height_map: the grid is the map's largest centred square (half-width {hw:.4g}); the map "
