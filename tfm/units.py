@@ -75,6 +75,21 @@ COLUMN_UNITS = {
     "si": {"length": "m", "force": "N", "area": "m^2", "time": "s"},
 }
 COLUMN_UNITS["si"]["columns"] = COLUMN_UNITS["paper"]["columns"]
+#: the parameters (a campaign's p_* columns) that carry a dimension, in the same systems;
+#: k_th (paper units only) is F* per L*^(2 alpha), since F_th = K_th A^alpha, and E and
+#: gamma exist only in SI. The others are dimensionless (tests/test_units.py checks that
+#: every float parameter is in one list or the other).
+_PARAMETER_LENGTHS = ("spacing", "radius", "extent", "max_indent", "step", "rms_height",
+                      "short_cutoff", "long_cutoff", "map_pixel_size")
+_PARAMETER_FORCES = ("f_th", "max_load", "load_step")
+COLUMN_UNITS["paper"]["parameters"] = {**dict.fromkeys(_PARAMETER_LENGTHS, "length"),
+                                       **dict.fromkeys(_PARAMETER_FORCES, "force"), "k_th": "k_th"}
+COLUMN_UNITS["paper"]["k_th"] = "F*/L*^(2 alpha)"
+COLUMN_UNITS["si"]["parameters"] = {**dict.fromkeys(_PARAMETER_LENGTHS, "length"),
+                                    **dict.fromkeys(_PARAMETER_FORCES, "force"),
+                                    "youngs_modulus": "modulus", "work_of_adhesion": "work_of_adhesion"}
+COLUMN_UNITS["si"]["modulus"] = "Pa"
+COLUMN_UNITS["si"]["work_of_adhesion"] = "J/m^2"
 FORCE_COLUMNS = tuple(k for k, dim in COLUMN_UNITS["paper"]["columns"].items() if dim == "force")
 
 
