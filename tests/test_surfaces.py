@@ -551,3 +551,13 @@ def test_has_modes_is_the_synthesis_mask():
         rolloff = 0.0 if rng.random() < 0.7 else 1.0
         mask = self_affine_psd(wavevectors(n, sp), 0.8, short, long_, rolloff) > 0
         assert mask.any() == has_modes(n, sp, short, long_, rolloff), (n, short, long_, rolloff)
+
+
+def test_a_topography_s_own_pixel_size_given_again_is_the_same_run(tmp_path):
+    """map_pixel_size equal to the file's own pixel size is the same physics as leaving it
+    out, but it made a second run id (a campaign would compute the run twice)."""
+    path = _topography(tmp_path, "own.nc", np.random.default_rng(3).normal(size=(20, 20)), (20.0, 20.0), "um")
+    kw = dict(SI_MAP, height_map=path, spacing=1e-6, max_indent=1e-7, step=1e-8)
+    bare = Params(**kw)
+    again = Params(**kw, map_pixel_size=1e-6)
+    assert again.map_pixel_size is None and again.run_id == bare.run_id

@@ -770,6 +770,9 @@ def _validate_surface(p: Params) -> None:
                     f"{' (L* = 1 m in paper units)' if p.units == 'paper' else ''}; map_pixel_size applies "
                     f"to maps without one (.npy), got {p.map_pixel_size!r}. To rescale the map, save its "
                     "heights as .npy and give map_pixel_size")
+            # the file's own value given again: the record (and the run id) is the one
+            # made without it, since the physics is the same
+            object.__setattr__(p, "map_pixel_size", None)
         if p.height_map_hash is None:
             object.__setattr__(p, "height_map_hash", hm.sha256)
         elif p.height_map_hash != hm.sha256:
