@@ -1,5 +1,6 @@
 """Bad input fails early, with a message naming the parameter and the allowed range."""
 import math
+import warnings
 
 import pytest
 
@@ -274,3 +275,21 @@ def test_snapshots_read_like_every_other_whole_number():
             Params.from_dict({**kw, "snapshots": value})
     with pytest.raises(ParameterError, match="snapshots: expected an integer, got True"):
         Params.from_dict({**kw, "snapshots": True})
+
+
+def test_a_loose_tree_opening_angle_is_warned_about():
+    """theta up to 1 was accepted silently, though its error bound there is 103 % of
+    sum |f|/r and the pull-off indent moved 18 steps against the direct sum (spacing 1/48,
+    a user's hunt); 0.7 is the largest angle that kept the pull-off within 1e-5."""
+    base = dict(spacing="1/48", k_th=0.02, shape="paraboloid", max_indent=0.05, operator="tree")
+    with pytest.warns(ParameterWarning, match=r"theta: 1 is loose: the tree's error bound is 1"):
+        Params.from_dict(dict(base, theta=1.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Params.from_dict(dict(base, theta=0.7))
+
+
+def test_a_name_in_the_wrong_case_gets_its_hint():
+    """'tre' got "did you mean 'tree'?", 'FFT' got no hint."""
+    with pytest.raises(ParameterError, match=r"operator: unknown value 'FFT'.*did you mean 'fft'\?"):
+        Params.from_dict(dict(operator="FFT"))
