@@ -291,13 +291,19 @@ def test_a_huge_sphere_is_the_paraboloid_to_round_off():
 def test_height_maps_must_cover_where_the_layouts_springs_reach(tmp_path):
     """Hexagonal rows reach ceil(hw / dy) dy > hw: validated as a square grid, the run
     ended in a MapError traceback ('a spring lies outside the map')."""
+    from tfm.geometry import make_layout
+
     m = tmp_path / "m.npy"
     np.save(m, np.zeros((64, 64)))
     kw = dict(shape="height_map", height_map=str(m), map_pixel_size="1/32", spacing="1/32", k_th=0.02,
               max_indent=0.003, step=2e-4, operator="direct")
-    Params.from_dict(kw)
+    square = Params.from_dict(kw)
+    # the automatic extent is the largest hexagonal grid the map covers; the square grid's
+    # half-width, given as the extent, reaches past the map
+    hexagonal = Params.from_dict(dict(kw, layout="hexagonal"))
+    assert np.abs(make_layout(hexagonal).y).max() <= 31 / 32 < square.half_width + 1 / 32
     with pytest.raises(ParameterError, match="height_map: the map .* smaller than the grid"):
-        Params.from_dict(dict(kw, layout="hexagonal"))
+        Params.from_dict(dict(kw, layout="hexagonal", extent=square.half_width))
 
 
 def test_the_memory_estimate_counts_the_neighbour_list():

@@ -561,3 +561,23 @@ def test_a_topography_s_own_pixel_size_given_again_is_the_same_run(tmp_path):
     bare = Params(**kw)
     again = Params(**kw, map_pixel_size=1e-6)
     assert again.map_pixel_size is None and again.run_id == bare.run_id
+
+
+@pytest.mark.parametrize("layout", ["hexagonal", "jittered"])
+def test_a_map_on_another_layout_gets_a_grid_it_covers(tmp_path, layout):
+    """With the automatic extent, a height map on the hexagonal or jittered layout was
+    always refused ("smaller than the grid"; a finer spacing did not help): the grid took
+    the square grid's half-width, and those layouts reach further (a user's hunt). Now the
+    grid is the largest of the layout that the map covers, and its springs read the map."""
+    m = tmp_path / "m.npy"
+    np.save(m, 1e-3 * np.random.default_rng(0).standard_normal((129, 129)))
+    for spacing in ("1/32", "1/48"):
+        p = Params.from_dict(dict(shape="height_map", height_map=str(m), map_pixel_size="1/64", spacing=spacing,
+                                  f_th=0, max_indent=0.01, step=5e-4, layout=layout, operator="direct"))
+        lay = make_layout(p)
+        reach = 64 / 64                                    # 64 pixels each side of the centre
+        assert max(np.abs(lay.x).max(), np.abs(lay.y).max()) <= reach * (1 + 1e-12)
+        # and no smaller than one step of the layout short of it
+        step = p.spacing * (np.sqrt(3) / 2 if layout == "hexagonal" else 1.0)
+        assert max(np.abs(lay.x).max(), np.abs(lay.y).max()) > reach - step - p.jitter * p.spacing - 1e-12
+        assert np.isfinite(heights(p, lay)).all()

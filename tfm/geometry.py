@@ -74,6 +74,32 @@ def jittered_grid(spacing: float, half_width: float, jitter: float, seed: int) -
     return Layout(x, y, base.area.copy(), spacing, None, base.edge.copy())
 
 
+def layout_reach(p: Params, half_width: float) -> float:
+    """How far from the centre the springs of ``p``'s layout built for ``half_width`` can
+    lie along x or y (the grids above: square rows stop at ceil(hw / spacing) spacings,
+    hexagonal rows at ceil(hw / dy) dy, jittered springs up to jitter spacings further)."""
+    if p.layout == "hexagonal":
+        dy = p.spacing * math.sqrt(3.0) / 2.0
+        return max(half_width, math.ceil(half_width / dy) * dy)
+    reach = math.ceil(half_width / p.spacing - 1e-9) * p.spacing
+    return reach + (p.jitter * p.spacing if p.layout == "jittered" else 0.0)
+
+
+def largest_half_width(p: Params, reach: float) -> float:
+    """The largest half-width on the layout's own steps whose springs stay within
+    ``reach`` of the centre (``layout_reach`` <= reach), or 0."""
+    if p.layout == "hexagonal":
+        dy = p.spacing * math.sqrt(3.0) / 2.0
+        k = math.floor(reach / dy + 1e-9)
+        hw = k * dy
+        while hw > 0 and math.ceil(hw / dy) > k:     # k dy / dy may round above k
+            hw = math.nextafter(hw, 0.0)
+        return max(hw, 0.0)
+    if p.layout == "jittered":
+        reach -= p.jitter * p.spacing
+    return max(math.floor(reach / p.spacing + 1e-9), 0) * p.spacing
+
+
 def make_layout(p: Params) -> Layout:
     hw = p.half_width
     if p.layout == "square":

@@ -826,19 +826,13 @@ def _check_map_covers(p: Params) -> None:
     """A height map covers the grid (before the spacing is checked against the grid: a
     map too small for one spring a side is the map's fault, not the spacing's)."""
     if p.shape == "height_map":
-        from .surfaces import load_height_map, map_half_width, map_pixel
+        from .geometry import layout_reach
+        from .surfaces import load_height_map, map_pixel, map_reach
         hw = p.half_width
         hm = load_height_map(p.height_map)
-        avail = map_half_width(p, hm)
-        # how far the layout's springs reach (tfm.geometry): hexagonal rows go to
-        # ceil(hw / dy) dy, jittered springs up to jitter spacings past their grid points
-        need = math.ceil(hw / p.spacing - 1e-9) * p.spacing
-        if p.layout == "hexagonal":
-            dy = p.spacing * math.sqrt(3.0) / 2.0
-            need = max(hw, math.ceil(hw / dy - 1e-9) * dy)
-        elif p.layout == "jittered":
-            need += p.jitter * p.spacing
-        if avail <= 0 or need > avail * (1 + 1e-9):
+        avail = min(map_reach(p, hm))
+        need = layout_reach(p, hw)
+        if hw <= 0 or need > avail * (1 + 1e-9):
             nx, ny = hm.heights.shape
             own = (f", the file's {hm.pixel_size:g} {hm.unit or ''} taken in metres"
                    + (" (L* = 1 m in paper units)" if p.units == "paper" else "")

@@ -386,8 +386,9 @@ def map_reach(p, hm: HeightMap) -> tuple[float, float]:
 
 
 def map_half_width(p, hm: HeightMap) -> float:
-    """Half-width of the largest centred square of springs the map covers."""
-    return math.floor(min(map_reach(p, hm)) / p.spacing + 1e-9) * p.spacing
+    """Half-width of the largest centred grid of the run's layout that the map covers."""
+    from .geometry import largest_half_width
+    return largest_half_width(p, min(map_reach(p, hm)))
 
 
 def map_cropped_edge(p, x: np.ndarray, y: np.ndarray, edge: np.ndarray) -> np.ndarray:
