@@ -157,6 +157,19 @@ class DirectOperator:
                           tgt, self.spec.kind, self.spec.cutoff)
 
 
+#: the classes of the operators' compiled data (tfm.kernels.ops), which the compiled loop
+#: is specialised on
+DATA_NAMES = ("FFTData", "DirectData", "TreeData", "SparseData")
+
+
+def compiled_data_name(p: Params) -> str:
+    """The class of ``make_operator(p, ...).compiled()``: the tree operator hands a neighbour
+    list (SparseData) to the loop for the short-ranged kernels."""
+    if p.operator in ("fft", "direct"):
+        return {"fft": "FFTData", "direct": "DirectData"}[p.operator]
+    return "TreeData" if p.kernel == "boussinesq" else "SparseData"
+
+
 def make_operator(p: Params, spec: KernelSpec, layout: Layout, symbol=None):
     if p.operator == "fft":
         return FFTOperator(spec, layout, symbol)

@@ -52,12 +52,17 @@ def _dispatchers():
 FORCE_CONTROL_ONLY = ("solve_on_set",)
 
 
-def cold_kernels(control: str = "displacement") -> list[str]:
+def cold_kernels(control: str = "displacement", data: str | None = None) -> list[str]:
     """Names of the hot kernels a run under ``control`` uses whose Numba cache is missing
-    or stale (they will compile).
+    or stale (they will compile). ``data``: the class of the operator's compiled data
+    (``tfm.operators.compiled_data_name``); a kernel specialised on operator data is cold
+    too when its cache holds only other operators' (a first direct run after FFT runs
+    compiled for 20 s without a word).
 
     Reads each dispatcher's cache index, which Numba empties when the source changed.
     Returns [] if the check itself is not possible (another Numba version)."""
+    from .operators import DATA_NAMES
+
     cold = []
     try:
         for disp in {id(d): d for d in _dispatchers()}.values():
@@ -65,9 +70,11 @@ def cold_kernels(control: str = "displacement") -> list[str]:
                 continue       # never compiled by such a run: "compiling" would show on every run
             cache = getattr(disp, "_cache", None)
             index = cache._cache_file._load_index() if hasattr(cache, "_cache_file") else {}
-            if not index:
+            sigs = [str(key[0]) for key in index]
+            by_data = [s for s in sigs if any(f"{name}(" in s for name in DATA_NAMES)]
+            if not sigs or (data is not None and by_data and not any(f"{data}(" in s for s in by_data)):
                 cold.append(disp.py_func.__qualname__)
-    except (AttributeError, ImportError, OSError):
+    except (AttributeError, ImportError, OSError, TypeError, IndexError):
         return []
     return cold
 
@@ -79,7 +86,9 @@ def run_progress(p, quiet: bool = False, stream=None):
     if quiet:
         yield None
         return
-    cold = cold_kernels(p.control)
+    from .operators import compiled_data_name
+
+    cold = cold_kernels(p.control, compiled_data_name(p))
     if cold:
         print(f"compiling Numba kernels ({', '.join(cold)}; first run after an install or a code change, "
               "cached for later runs) ...", file=stream, flush=True)
