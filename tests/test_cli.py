@@ -748,3 +748,34 @@ def test_a_note_stated_before_the_run_is_not_repeated_after_it(tmp_path, capsys)
                  "--step", "1e-3", "--allow", "coarse", "--no-plot", "-o", str(tmp_path / "r.parquet")]) == 3
     err = capsys.readouterr().err
     assert err.count("allowed past the 'coarse' guard") == 1
+
+
+def test_a_run_without_checkpoints_does_not_bury_another_runs_saved_state(tmp_path, capsys):
+    """A run that keeps no checkpoint (snapshots, force control, --no-checkpoints) wrote
+    its table beside another killed run's saved state without a word, and that state was
+    later continued over the new table (a user's hunt). Now it is refused as for a
+    checkpointed run; with --overwrite the state is discarded once the table is written."""
+    import tfm
+
+    out = tmp_path / "kk.parquet"
+    ckpt = tmp_path / "kk.checkpoint.npz"
+    seen = []
+
+    def stop(rec):
+        seen.append(rec)
+        if len(seen) == 15:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        tfm.simulate(spacing=1 / 32, k_th=0.02, shape="paraboloid", max_indent=0.05, step=2.5e-3,
+                     checkpoint=ckpt, checkpoint_every=0, progress=stop)
+    saved = ckpt.read_bytes()
+    base = ["run", "--spacing", "1/32", "--k-th", "0.03", "--shape", "paraboloid", "--max-indent", "0.05",
+            "--step", "2.5e-3", "--no-plot", "-o", str(out)]
+    for extra in (["--snapshots", "events"], ["--no-checkpoints"], ["--control", "force"]):
+        capsys.readouterr()
+        assert main([*base, *extra]) == 2, extra
+        assert "holds the saved state of another run" in capsys.readouterr().err
+        assert ckpt.read_bytes() == saved and not out.exists()
+    assert main([*base, "--no-checkpoints", "--overwrite"]) == 0
+    assert not ckpt.exists() and out.exists()

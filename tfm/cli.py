@@ -168,9 +168,13 @@ def _checkpoint_options(args, p: Params, out: Path) -> dict:
     """simulate()'s checkpoint arguments: by default a displacement-controlled run without
     snapshots saves its state beside the table every CHECKPOINT_EVERY seconds, and the same
     command continues a killed run. Asking for checkpoints where they cannot serve is refused."""
+    path = checkpoint_path_for(out)
     if args.no_checkpoints:
         if args.checkpoint_every is not None:
             raise ParameterError("checkpoint-every: give it or --no-checkpoints, not both")
+        # a run without checkpoints that replaced the table beside another run's saved
+        # state left that state to be continued over its table, without a word
+        _check_foreign_checkpoint(path, p, args.overwrite)
         return {}
     from .checkpoint import check_every, why_not
     from .config import CHECKPOINT_EVERY
@@ -179,12 +183,12 @@ def _checkpoint_options(args, p: Params, out: Path) -> dict:
     if args.checkpoint_every is None:
         every = CHECKPOINT_EVERY
         if reason:
+            _check_foreign_checkpoint(path, p, args.overwrite)
             return {}
     else:
         every = check_every(args.checkpoint_every, "checkpoint-every")
         if reason:
             raise ParameterError(f"checkpoint-every: {reason}")
-    path = checkpoint_path_for(out)
     _check_foreign_checkpoint(path, p, args.overwrite)
     # kept until the table is written (_run_and_write): a stop while it is written would
     # otherwise find neither table nor checkpoint
@@ -248,6 +252,7 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
         warnings.simplefilter("always", CheckpointWarning)
         res = simulate(p, progress=progress, fields_path=fields_path_for(out) if p.snapshots != "none" else None,
                        **ckpt)
+    planned = out
     try:
         for w in caught:                      # a checkpoint set aside, say
             print(f"tfm: warning: {w.message}", file=sys.stderr)
@@ -269,6 +274,13 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
     args.written = out                    # for the message of an interruption from here on
     if ckpt:
         Path(ckpt["checkpoint"]).unlink(missing_ok=True)     # the table holds the run now
+    elif out == planned:
+        # nor does a saved state beside it that --overwrite discarded, or this run's own
+        # from an earlier, checkpointed attempt (it would continue over the table)
+        from .checkpoint import Checkpoint
+        left = checkpoint_path_for(out)
+        if left.exists() and (args.overwrite or Checkpoint(left, p.run_id).foreign() is None):
+            left.unlink(missing_ok=True)
     return res, out, plot
 
 
