@@ -274,6 +274,25 @@ def test_a_failed_animation_leaves_the_earlier_one_whole(stored_run, tmp_path, m
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.gif"]
 
 
+def test_an_ffmpeg_that_fails_is_reported_not_taken_for_a_closed_stdout(stored_run, tmp_path, monkeypatch, capsys):
+    """ffmpeg present but failing (here a stand-in that exits at once): its broken pipe was
+    taken for tfm's own stdout's, and `tfm animate -o a.mp4` ended with status 141 and not
+    a word (a user's hunt)."""
+    import os
+
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    fake = bin_dir / "ffmpeg"
+    fake.write_text("#!/bin/sh\necho 'fake ffmpeg: unsupported encoder' >&2\nexit 1\n")
+    fake.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{bin_dir}{os.pathsep}{os.environ['PATH']}")
+    out = tmp_path / "a.mp4"
+    assert main(["animate", str(stored_run), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "ffmpeg failed to write .mp4" in err and "write a .gif instead" in err, err
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == ["bin"]
+
+
 def test_animate_and_show_a_table_whose_record_does_not_rebuild(stored_run, tmp_path, capsys):
     """A height map moved after its run: tfm animate wrote the GIF, then stopped with an
     AttributeError on the missing record."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import subprocess
 import sys
 import warnings
 from pathlib import Path
@@ -338,37 +339,59 @@ def _write_animation(fields, curve, params, out, fps, steps, dpi) -> None:
         cmap = None
         writer = _mp4_writer(fig, out, fps, dpi) if out.suffix.lower() == ".mp4" else None
         background = None
-        for k in steps:
-            snap = fields.snapshot(k)
-            if cmap is None:
-                cmap = plots.ContactMap(ax_map, fields, snap, vlim=vlim, params=params)
-                plots.tidy_ticks(ax_map)
-                plots.fold_offsets(fig)          # the axes are fixed: as tfm show draws them
-            else:
-                cmap.update(snap)
-            title.set_text(head + plots.snapshot_title(snap, params))
-            marker.set_data([-snap["d"]], [snap["force"]])
+        try:
+            for k in steps:
+                snap = fields.snapshot(k)
+                if cmap is None:
+                    cmap = plots.ContactMap(ax_map, fields, snap, vlim=vlim, params=params)
+                    plots.tidy_ticks(ax_map)
+                    plots.fold_offsets(fig)          # the axes are fixed: as tfm show draws them
+                else:
+                    cmap.update(snap)
+                title.set_text(head + plots.snapshot_title(snap, params))
+                marker.set_data([-snap["d"]], [snap["force"]])
+                if writer is not None:
+                    writer.grab_frame()
+                    continue
+                # blitting: the axes, ticks and curves are drawn once; each frame redraws
+                # only what moves (map, contact line, marker, title) over that background
+                moving = cmap.artists() + [marker, title]
+                for artist in moving:
+                    artist.set_animated(True)
+                if background is None:
+                    canvas.draw()
+                    fig.set_layout_engine("none")      # the first frame's layout holds for all
+                    background = canvas.copy_from_bbox(fig.bbox)
+                canvas.restore_region(background)
+                for artist in moving:
+                    fig.draw_artist(artist)
+                frames.append(_to_palette(canvas))
             if writer is not None:
-                writer.grab_frame()
-                continue
-            # blitting: the axes, ticks and curves are drawn once; each frame redraws
-            # only what moves (map, contact line, marker, title) over that background
-            moving = cmap.artists() + [marker, title]
-            for artist in moving:
-                artist.set_animated(True)
-            if background is None:
-                canvas.draw()
-                fig.set_layout_engine("none")      # the first frame's layout holds for all
-                background = canvas.copy_from_bbox(fig.bbox)
-            canvas.restore_region(background)
-            for artist in moving:
-                fig.draw_artist(artist)
-            frames.append(_to_palette(canvas))
-        if writer is not None:
-            writer.finish()
+                writer.finish()
+        except (BrokenPipeError, subprocess.CalledProcessError) as exc:
+            # ffmpeg ended early (an encoder it lacks, a bad build): its broken pipe was
+            # taken for tfm's own stdout's, and the command ended with status 141, silent
+            raise ViewError(f"ffmpeg failed to write {out.suffix} ({_ffmpeg_error(writer, exc)}); "
+                            "write a .gif instead (-o anim.gif)") from None
     if frames:
         frames[0].save(out, save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0,
                        format="GIF")
+
+
+def _ffmpeg_error(writer, exc) -> str:
+    """ffmpeg's last line on stderr, else what failed."""
+    proc = getattr(writer, "_proc", None)
+    err = getattr(exc, "stderr", None)
+    if not err and proc is not None:
+        try:
+            proc.kill()
+            err = proc.communicate(timeout=10)[1]
+        except (OSError, ValueError, subprocess.SubprocessError):
+            err = None
+    if isinstance(err, bytes):
+        err = err.decode(errors="replace")
+    lines = (err or "").strip().splitlines()
+    return lines[-1] if lines else type(exc).__name__
 
 
 def _to_palette(canvas):
