@@ -252,7 +252,7 @@ def test_animate_makes_a_gif_with_one_frame_per_unloading_snapshot(stored_run, t
     assert Image.open(out).n_frames == expected
 
 
-def test_a_failed_animation_leaves_the_earlier_one_whole(stored_run, tmp_path, monkeypatch):
+def test_a_failed_animation_leaves_the_earlier_one_whole(stored_run, tmp_path, monkeypatch, capsys):
     """A write that failed with --overwrite (an fps too low for a GIF, then) left the old
     GIF truncated to 416 unreadable bytes."""
     from PIL import Image
@@ -268,8 +268,8 @@ def test_a_failed_animation_leaves_the_earlier_one_whole(stored_run, tmp_path, m
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(viewcli, "_write_animation", broken)
-    with pytest.raises(OSError):
-        main(["animate", str(stored_run), "-o", str(out), "--overwrite"])
+    assert main(["animate", str(stored_run), "-o", str(out), "--overwrite"]) == 1
+    assert "No space left on device" in capsys.readouterr().err
     assert out.read_bytes() == before and Image.open(out).n_frames > 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.gif"]
 
@@ -327,6 +327,67 @@ def test_a_table_renamed_with_its_snapshots_still_finds_them(stored_run, tmp_pat
     err = capsys.readouterr().err
     assert "the run stored field snapshots, but they are not beside the table" in err
     assert "curve.fields.nc and g.fields.nc" in err
+
+
+def test_a_renamed_table_finds_its_snapshots_when_its_old_name_holds_a_newer_runs(stored_run, tmp_path, capsys):
+    """Renamed with its snapshots (keep.parquet, keep.fields.nc), then a new run written
+    under the old name: the table's recorded name (curve.fields.nc) now held the new run's
+    snapshots, its own keep.fields.nc was never tried, and it was refused as stale with
+    advice to rerun it (a user's hunt)."""
+    import shutil
+
+    keep = tmp_path / "keep.parquet"
+    shutil.copy(stored_run, keep)
+    shutil.copy(stored_run.with_name("curve.fields.nc"), tmp_path / "keep.fields.nc")
+    newer = tmp_path / "curve.parquet"                 # another run under the recorded name
+    assert main(["run", "--spacing", "1/32", "--k-th", "0.03", "--shape", "paraboloid", "--max-indent", "0.05",
+                 "--step", "1e-3", "--snapshots", "events", "-q", "--no-plot", "-o", str(newer)]) == 0
+    capsys.readouterr()
+    assert main(["show", str(keep), "--step", "pull_off", "-o", str(tmp_path / "k.png")]) == 0
+    # and with no snapshots of its own beside it, the newer run's are still refused
+    (tmp_path / "keep.fields.nc").unlink()
+    assert main(["show", str(keep), "-o", str(tmp_path / "k2.png")]) == 2
+    assert "stale, from an earlier run" in capsys.readouterr().err
+
+
+def test_a_damaged_snapshot_or_an_output_that_cannot_be_replaced_is_one_line(stored_run, tmp_path, capsys):
+    """A chunk of F damaged on disk gave h5py's OSError as a traceback; so did a figure that
+    could not be replaced (read-only folder), after the drawing. Both are one line, exit 1,
+    and the earlier figure is left whole."""
+    import os
+    import shutil
+
+    import h5py
+
+    table, fields = tmp_path / "d.parquet", tmp_path / "d.fields.nc"
+    shutil.copy(stored_run, table)
+    shutil.copy(stored_run.with_name("curve.fields.nc"), fields)
+    with h5py.File(fields, "r") as f:
+        info = [f["F"].id.get_chunk_info(i) for i in range(f["F"].id.get_num_chunks())]
+    raw = bytearray(fields.read_bytes())
+    for c in info:                                     # every chunk of F: whatever step is drawn
+        for k in range(c.byte_offset + 8, c.byte_offset + min(c.size, 64)):
+            raw[k] ^= 0xFF
+    fields.write_bytes(bytes(raw))
+    assert main(["show", str(table), "--step", "pull_off", "-o", str(tmp_path / "x.png")]) == 1
+    err = capsys.readouterr().err
+    assert "cannot be read" in err and "the file is damaged" in err and "Traceback" not in err
+    # a figure that cannot be replaced (an immutable file: chattr +i); faked, since the
+    # tests may run as root, for whom read-only folders are writable
+    shutil.copy(stored_run, tmp_path / "c.parquet")
+    assert main(["plot", str(tmp_path / "c.parquet")]) == 0
+    before = (tmp_path / "c.png").read_bytes()
+
+    def refused(src, dst):
+        raise PermissionError(1, "Operation not permitted", str(dst))
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(os, "replace", refused)
+        capsys.readouterr()
+        assert main(["plot", str(tmp_path / "c.parquet")]) == 1
+    err = capsys.readouterr().err
+    assert f"tfm: error: {tmp_path / 'c.png'}: Operation not permitted" in err and "Traceback" not in err
+    assert (tmp_path / "c.png").read_bytes() == before and not list(tmp_path.glob(".c.*"))
 
 
 def test_show_without_snapshots_says_how_to_get_them(tmp_path, capsys):

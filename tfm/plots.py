@@ -216,10 +216,20 @@ def reference_label(p) -> str | None:
 
 
 def _save(fig, path):
+    """Save through a temporary name beside ``path``: an interrupted or failed save leaves
+    an earlier figure whole, and no stray temporary file (tfm show wrote in place)."""
+    import os
+
     fold_offsets(fig)
     if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=DPI)
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+        try:
+            fig.savefig(tmp, dpi=DPI)
+            os.replace(tmp, path)
+        finally:
+            tmp.unlink(missing_ok=True)
     return fig
 
 
@@ -296,18 +306,9 @@ def plot_curve(curve, params=None, path=None, title=None, hertz=True, reuse=None
 
 
 def write_curve_figure(curve, params, path, reuse=None) -> Path:
-    """``plot_curve`` saved through a temporary name beside ``path``: an interrupted save
-    leaves no half-written figure, and no stray temporary file."""
-    import os
-
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
-        plot_curve(curve, params, tmp, reuse=reuse)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return path
+    """``plot_curve`` saved at ``path`` (through a temporary name, as every figure)."""
+    plot_curve(curve, params, path, reuse=reuse)
+    return Path(path)
 
 
 def _curve_axes(ax1, ax2, p=None):

@@ -349,7 +349,11 @@ class Fields:
             import h5py                     # plain h5py reads a slice ~50x faster than h5netcdf
 
             self._h5 = h5py.File(self.path, "r")
-        out = {name: self._h5[name][i] for name in ("F", "u", "state")}
+        try:
+            out = {name: self._h5[name][i] for name in ("F", "u", "state")}
+        except OSError as exc:           # a chunk damaged on disk (the header read fine)
+            raise OSError(f"{self.path}: the snapshot of step {step} cannot be read ({exc}); the file is "
+                          "damaged: rerun the run with --snapshots to store it again") from None
         if self.force_scale != self.file_scale:
             out["F"] = out["F"] * (self.force_scale / self.file_scale)
         out.update(step=int(step), d=float(self.d[i]), force=float(self.force[i]),

@@ -144,29 +144,38 @@ def _need_fields(path, fields, params):
     if fields is None:
         raise ViewError(f"{path}: the run stored no field snapshots; rerun it with --snapshots events "
                         "(or --snapshots K for every K-th step)")
-    from .results import read_metadata
+    from .results import fields_path_for, read_metadata
     from .snapshots import Fields
     from .units import force_scale, to_paper
 
-    try:
-        out = Fields(fields)
-    except (OSError, KeyError) as exc:
-        raise ViewError(f"{fields}: not a readable field snapshots file ({exc})") from None
     # Another run's snapshots left beside the table (a rerun to the same -o without any)
     # would be drawn with this curve. An SI run's file written before the writer recorded
     # the SI record holds its paper-units twin's run id (tfm.units.to_paper): accept both.
     table_id = read_metadata(path).get("run_id")
     ours = {table_id} | ({params.run_id, to_paper(params).run_id} if params is not None else set())
     ours.discard(None)
-    theirs = out.attrs.get("run_id")
-    theirs = theirs.decode() if isinstance(theirs, bytes) else theirs
-    if ours and theirs not in ours:
-        held = f"the snapshots of run {theirs}" if theirs else "snapshots of no recorded run"
-        raise ViewError(f"{fields} holds {held}, not of run {table_id or params.run_id} in {path}: "
-                        "stale, from an earlier run; rerun this one with --snapshots events")
-    if params is not None:
-        out.use_force_scale(force_scale(params))      # forces in the table's units (SI: N)
-    return out
+    # the recorded name first, then the table's own <stem>.fields.nc: a table renamed with
+    # its snapshots, whose recorded name now holds a newer run's, was refused as stale
+    own = fields_path_for(path)
+    stale = None
+    for candidate in [fields] + ([own] if own != fields and own.exists() else []):
+        try:
+            out = Fields(candidate)
+        except (OSError, KeyError) as exc:
+            if stale is None:
+                raise ViewError(f"{candidate}: not a readable field snapshots file ({exc})") from None
+            continue
+        theirs = out.attrs.get("run_id")
+        theirs = theirs.decode() if isinstance(theirs, bytes) else theirs
+        if not ours or theirs in ours:
+            if params is not None:
+                out.use_force_scale(force_scale(params))      # forces in the table's units (SI: N)
+            return out
+        if stale is None:
+            held = f"the snapshots of run {theirs}" if theirs else "snapshots of no recorded run"
+            stale = (f"{candidate} holds {held}, not of run {table_id or params.run_id} in {path}: "
+                     "stale, from an earlier run; rerun this one with --snapshots events")
+    raise ViewError(stale)
 
 
 def pick_step(fields, step: str) -> int:
@@ -204,6 +213,12 @@ def _guard(fn, args) -> int:
     except ViewError as exc:
         print(f"tfm: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        # after the checks: a snapshot file damaged inside, an output that cannot be
+        # replaced (read-only, immutable), a full disk; an earlier output is left whole
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        print(f"tfm: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 1
     print(f"wrote {out}", file=sys.stderr)
     return 0
 
@@ -217,8 +232,9 @@ def _output(args, default: Path, suffixes: tuple[str, ...]) -> Path:
 
     out = Path(args.output) if args.output else default
     try:
-        check_output(out, "-o", suffixes, overwrite=args.overwrite or not args.output,
-                     create=not args.output)
+        # a default output in a folder that cannot be written was reported as "-o: ..."
+        check_output(out, "-o" if args.output else f"{out.name} (the default; -o puts it elsewhere)", suffixes,
+                     overwrite=args.overwrite or not args.output, create=not args.output)
     except OutputError as exc:
         raise ViewError(str(exc)) from None
     return out
