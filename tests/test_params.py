@@ -293,3 +293,14 @@ def test_a_name_in_the_wrong_case_gets_its_hint():
     """'tre' got "did you mean 'tree'?", 'FFT' got no hint."""
     with pytest.raises(ParameterError, match=r"operator: unknown value 'FFT'.*did you mean 'fft'\?"):
         Params.from_dict(dict(operator="FFT"))
+
+
+def test_minus_zero_is_the_same_run_as_zero():
+    """k_th = [0.0, -0.0] in a campaign made two runs with one result: the run id hashed
+    the JSON, which keeps the sign of zero (a user's hunt)."""
+    import numpy as np
+
+    base = dict(spacing="1/16", shape="paraboloid", step=2e-3, max_indent=0.05)
+    ids = {Params.from_dict(dict(base, k_th=k)).run_id for k in (0.0, -0.0, np.float64(-0.0), 0)}
+    assert len(ids) == 1
+    assert math.copysign(1.0, Params.from_dict(dict(base, k_th=-0.0)).k_th) == 1.0

@@ -348,18 +348,23 @@ def _is_missing(value: Any) -> bool:
 
 
 def _normalize(p: Params) -> None:
-    """NumPy scalars and ints in float fields become plain Python numbers, so equal
-    records have equal run ids (``radius=1`` and ``radius=np.float64(1.0)``)."""
+    """NumPy scalars and ints in float fields become plain Python numbers, and -0.0
+    becomes 0.0, so equal records have equal run ids (``radius=1`` and
+    ``radius=np.float64(1.0)``; ``k_th = [0.0, -0.0]`` made two runs of one)."""
     for name, kind in _KINDS.items():
         value = getattr(p, name)
         t = type(value)
-        if t is float or t is str or t is bool or value is None:
+        if t is float:
+            if value == 0.0:
+                object.__setattr__(p, name, 0.0)
+            continue
+        if t is str or t is bool or value is None:
             continue                                   # the common case, kept cheap
         if t is int:
             if kind == "float":
                 object.__setattr__(p, name, float(value))
         elif kind == "float" and isinstance(value, numbers.Real):
-            object.__setattr__(p, name, float(value))
+            object.__setattr__(p, name, float(value) + 0.0)       # + 0.0: -0.0 -> 0.0
         elif kind == "int" and isinstance(value, numbers.Integral):
             object.__setattr__(p, name, int(value))
     if isinstance(p.allow, str):
