@@ -401,6 +401,38 @@ def test_an_unreachable_scheduler_is_refused_before_the_folder_is_claimed(tmp_pa
     assert not any(tmp_path.iterdir())
 
 
+def test_a_malformed_scheduler_address_is_refused_in_words(tmp_path):
+    """An address without a port or with another scheme raised the ValueError of
+    distributed as a traceback (a user's hunt); an unreachable one was refused in words."""
+    pytest.importorskip("distributed")
+    for address in ("notanaddress", "http://127.0.0.1:8786"):
+        with pytest.raises(CampaignError, match=f"cannot reach the Dask scheduler at {address}"):
+            run_campaign(SMOKE, scheduler=address, results_dir=tmp_path)
+    assert not any(tmp_path.iterdir())
+
+
+def test_checkpoint_every_and_no_checkpoints_are_one_or_the_other(tmp_path, capsys):
+    """Given both, the last one won without a word (a user's hunt)."""
+    from tfm.cli import main
+
+    for argv in (["campaign", "run", str(SMOKE)], ["limit"]):
+        with pytest.raises(SystemExit) as stop:
+            main([*argv, "--results-dir", str(tmp_path / "r"), "--no-checkpoints", "--checkpoint-every", "5"])
+        assert stop.value.code == 2
+        assert "not allowed with argument" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_paper_report_folder_that_cannot_be_made_is_refused_before_the_runs(tmp_path, capsys):
+    """tfm paper --out <a file> raised FileExistsError as a traceback (a user's hunt)."""
+    from tfm.cli import main
+
+    (tmp_path / "afile").write_text("")
+    assert main(["paper", "--quick", "--out", str(tmp_path / "afile"), "--results-dir", str(tmp_path / "r")]) == 2
+    assert "out: cannot make the report's folder" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
 def test_jobs_2_and_dask_match_jobs_1_bitwise(serial_run, tmp_path):
     distributed = pytest.importorskip("distributed")
     results, _ = serial_run

@@ -64,12 +64,14 @@ def register(subparsers) -> None:
 def checkpoint_flag(parser) -> None:
     from ..config import CHECKPOINT_EVERY
 
-    parser.add_argument("--checkpoint-every", type=float, default=CHECKPOINT_EVERY, metavar="SECONDS",
-                        help="save a running curve's state this often, in <results>/<name>/checkpoints/, "
-                             f"so that a killed run continues from there (default {CHECKPOINT_EVERY:g})")
-    parser.add_argument("--no-checkpoints", dest="checkpoint_every", action="store_const", const=None,
-                        help="save no checkpoints (a killed run starts again from its first step; "
-                             "one saved earlier is still continued from)")
+    # one or the other: given both, the last one won without a word
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--checkpoint-every", type=float, default=CHECKPOINT_EVERY, metavar="SECONDS",
+                       help="save a running curve's state this often, in <results>/<name>/checkpoints/, "
+                            f"so that a killed run continues from there (default {CHECKPOINT_EVERY:g})")
+    group.add_argument("--no-checkpoints", dest="checkpoint_every", action="store_const", const=None,
+                       help="save no checkpoints (a killed run starts again from its first step; "
+                            "one saved earlier is still continued from)")
 
 
 def _max_runs_flag(parser) -> None:

@@ -610,7 +610,7 @@ def _dask_client(scheduler):
         return scheduler
     try:
         return Client(scheduler, timeout="30s")
-    except (OSError, TimeoutError) as exc:
+    except (OSError, TimeoutError, ValueError) as exc:     # ValueError: an address without a port, say
         raise CampaignError(f"scheduler: cannot reach the Dask scheduler at {scheduler} ({exc}); is it "
                             "running, and is the address right (e.g. tcp://host:8786)?") from None
 

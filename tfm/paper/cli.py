@@ -48,7 +48,10 @@ def cmd_paper(args) -> int:
     start = report.machine()
     results_dir = Path(args.results_dir or ("results/quick" if args.quick else "results"))
     out_dir = Path(args.out or ("results/quick/paper" if args.quick else "results/paper"))
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:                # a file there, or a place that cannot be made
+        raise ParameterError(f"out: cannot make the report's folder {out_dir}: {exc.strerror or exc}") from None
     if args.quick and args.results_dir is None:
         results_dir.mkdir(parents=True, exist_ok=True)
         (results_dir / ".gitignore").write_text("# tfm paper --quick: scratch output\n*\n")
