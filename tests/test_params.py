@@ -304,3 +304,11 @@ def test_minus_zero_is_the_same_run_as_zero():
     ids = {Params.from_dict(dict(base, k_th=k)).run_id for k in (0.0, -0.0, np.float64(-0.0), 0)}
     assert len(ids) == 1
     assert math.copysign(1.0, Params.from_dict(dict(base, k_th=-0.0)).k_th) == 1.0
+
+
+def test_extent_auto_is_the_automatic_extent():
+    """The README's table gives extent's default as auto, but 'auto' was refused as not a
+    number (a user's hunt)."""
+    base = dict(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05)
+    assert Params.from_dict(dict(base, extent="auto")) == Params.from_dict(base)
+    assert Params.from_dict(dict(base, extent="none")).extent is None

@@ -473,6 +473,8 @@ NONE_WORDS = ("none", "null")
 def _coerce(key: str, value: Any, prefix: str) -> Any:
     if key == "snapshots":
         return _coerce_snapshots(value, prefix)
+    if key == "extent" and isinstance(value, str) and value.strip().lower() == "auto":
+        return None                      # as the README's table calls the automatic extent
     if isinstance(value, str) and value.strip().lower() in NONE_WORDS:
         if key in _OPTIONAL:
             return None
