@@ -689,3 +689,12 @@ def test_a_record_that_does_not_rebuild_is_named_not_silently_dropped(tmp_path, 
     assert main(["plot", str(out), "-o", str(tmp_path / "hm.png")]) == 0
     err = capsys.readouterr().err
     assert "its parameter record does not rebuild" in err and "no such file" in err
+
+
+def test_caption_numbers_are_rounded_before_they_are_written():
+    """An SI force of 9.99999999998603e-06 N was captioned "10 × 10⁻⁶ N", 9999.6 was
+    "1e+04" and d = -0.0 was "-0" (a user's hunt)."""
+    cases = {9.99999999998603e-06: "$10^{-5}$", 9999.6: "$10^{4}$", -0.0: "0", 1234.5: "1230",
+             2.5e-4: r"$2.5\times10^{-4}$", -1e-5: "$-10^{-5}$", 0.135: "0.135", 0.5: "0.5",
+             0.00319: "0.00319", 12.0: "12"}
+    assert {x: plots.number(x) for x in cases} == cases

@@ -113,15 +113,22 @@ def fold_offsets(fig):
 
 
 def number(x, digits=3) -> str:
-    """A number for a caption: 2×10⁻⁵ rather than 2e-05, 0.135 rather than 0.13500."""
-    if x == 0 or not math.isfinite(x):
+    """A number for a caption: 2×10⁻⁵ rather than 2e-05, 0.135 rather than 0.13500.
+    Rounded first, then written: 9.9996e-6 is 10⁻⁵, not 10×10⁻⁶, and 9999.6 is 10⁴, not
+    1e+04; -0.0 is 0."""
+    if x == 0:
+        return "0"
+    if not math.isfinite(x):
         return f"{x:g}"
-    exp = math.floor(math.log10(abs(x)))
+    mant, exp = f"{x:.{digits - 1}e}".split("e")
+    exp = int(exp)
     if -3 <= exp < 4:
-        return f"{x:.{digits}g}"
-    mant = x / 10 ** exp
-    mtxt = f"{mant:.{digits}g}"
-    return f"$10^{{{exp}}}$" if mtxt == "1" else f"${mtxt}\\times10^{{{exp}}}$"
+        text = f"{float(f'{mant}e{exp}'):.{max(digits - 1 - exp, 0)}f}"
+        return text.rstrip("0").rstrip(".") if "." in text else text
+    mant = mant.rstrip("0").rstrip(".") if "." in mant else mant
+    if mant in ("1", "-1"):
+        return f"${mant[:-1]}10^{{{exp}}}$"
+    return f"${mant}\\times10^{{{exp}}}$"
 
 
 def spacing_text(spacing) -> str:
