@@ -698,3 +698,27 @@ def test_caption_numbers_are_rounded_before_they_are_written():
              2.5e-4: r"$2.5\times10^{-4}$", -1e-5: "$-10^{-5}$", 0.135: "0.135", 0.5: "0.5",
              0.00319: "0.00319", 12.0: "12"}
     assert {x: plots.number(x) for x in cases} == cases
+
+
+def test_a_run_whose_unloading_was_capped_is_not_drawn_as_a_finished_one(tmp_path, capsys):
+    """With max_unload_steps reached, tfm show titled the snapshot of the largest tension
+    "(pull-off)", and neither it nor the curve's figure showed that the curve stops short
+    (a user's hunt)."""
+    from tfm.snapshots import Fields
+
+    out = tmp_path / "cap.parquet"
+    assert main(["run", "--spacing", "1/32", "--shape", "paraboloid", "--k-th", "0.02", "--max-indent", "0.05",
+                 "--step", "1e-3", "--max-unload-steps", "60", "--snapshots", "events", "-q", "--no-plot",
+                 "-o", str(out)]) == 3
+    curve = pd.read_parquet(out)
+    assert plots.unload_incomplete(curve) and int(curve["n_contact"].iloc[-1]) > 0
+    fig = plots.plot_curve(curve, tfm.Params.from_dict(tfm.results.read_metadata(out)["params"]))
+    assert plots.INCOMPLETE in fig._suptitle.get_text()
+    fields = Fields(tmp_path / "cap.fields.nc")
+    snap = fields.snapshot(fields.event_step("pull_off"))
+    assert "(largest tension so far" in plots.snapshot_title(snap, None, curve)
+    capsys.readouterr()
+    assert main(["show", str(out), "--step", "pull_off"]) == 0
+    assert "cap.parquet is a flagged run: unloading stopped at max_unload_steps" in capsys.readouterr().err
+    # a finished run keeps its words
+    assert "(pull-off" in plots.snapshot_title(snap, None, curve.iloc[:0])

@@ -307,6 +307,8 @@ def plot_curve(curve, params=None, path=None, title=None, hertz=True, reuse=None
     _curve_axes(ax1, ax2, params)
     if title is None and params is not None:
         title = run_caption(params)
+    if unload_incomplete(curve):
+        title = f"{title}\n{INCOMPLETE}" if title else INCOMPLETE
     if title:
         fig.suptitle(wrap_caption(title, fig.get_figwidth()), fontsize=8)
     return _save(fig, path)
@@ -465,8 +467,21 @@ EVENT_TEXT = {"pull_off": "pull-off", "max_load": "maximum load", "first_snap": 
               "last_contact": "last step in contact"}
 
 
-def snapshot_title(snap, params=None) -> str:
-    events = [EVENT_TEXT.get(e, "") for e in snap["event"].split(",") if e in EVENT_TEXT]
+def unload_incomplete(curve) -> bool:
+    """The curve ends with springs in contact after unloading began: ``max_unload_steps``
+    stopped it, and its "pull-off" is only the largest tension so far."""
+    if curve is None or not len(curve):
+        return False
+    last = curve.iloc[-1]
+    return str(last["phase"]) == "unload" and int(last["n_contact"]) > 0
+
+
+INCOMPLETE = "unloading stopped with springs in contact (max_unload_steps): the pull-off may lie further"
+
+
+def snapshot_title(snap, params=None, curve=None) -> str:
+    text = dict(EVENT_TEXT, pull_off="largest tension so far") if unload_incomplete(curve) else EVENT_TEXT
+    events = [text.get(e, "") for e in snap["event"].split(",") if e in text]
     ev = f" ({', '.join(events)})" if events else ""
     m, N = unit_suffixes(params)
     return (f"step {snap['step']}{ev}: $\\delta$ = {number(-snap['d'])}{m}, $P$ = {number(snap['force'])}{N}, "
@@ -504,7 +519,7 @@ def plot_contact_map(fields, snap, curve=None, params=None, path=None):
         marker = draw_curve_marker_panel(axes[1], curve, params)
         marker.set_data([-snap["d"]], [snap["force"]])
     head = wrap_caption(run_caption(params), fig.get_figwidth()) + "\n" if params is not None else ""
-    fig.suptitle(head + snapshot_title(snap, params), fontsize=8)
+    fig.suptitle(head + snapshot_title(snap, params, curve), fontsize=8)
     return _save(fig, path)
 
 

@@ -102,6 +102,9 @@ def load_run(path: Path):
         raise ViewError(f"{path}: not a readable Parquet table ({why}); give a curve table "
                         "written by tfm run or by a campaign") from None
     _check_one_curve(path, curve, meta)
+    flags = (meta.get("summary") or {}).get("warnings")
+    if flags:                            # a figure of a flagged run looked like any other
+        print(f"tfm: note: {path.name} is a flagged run: {flags}", file=sys.stderr)
     try:
         with warnings.catch_warnings():          # a stored record is complete and was valid
             warnings.simplefilter("ignore")
@@ -364,7 +367,7 @@ def _write_animation(fields, curve, params, out, fps, steps, dpi) -> None:
                     plots.fold_offsets(fig)          # the axes are fixed: as tfm show draws them
                 else:
                     cmap.update(snap)
-                title.set_text(head + plots.snapshot_title(snap, params))
+                title.set_text(head + plots.snapshot_title(snap, params, curve))
                 marker.set_data([-snap["d"]], [snap["force"]])
                 if writer is not None:
                     writer.grab_frame()
