@@ -689,6 +689,17 @@ def test_a_record_that_does_not_rebuild_is_named_not_silently_dropped(tmp_path, 
     assert main(["plot", str(out), "-o", str(tmp_path / "hm.png")]) == 0
     err = capsys.readouterr().err
     assert "its parameter record does not rebuild" in err and "no such file" in err
+    assert "which the axes do not say" not in err
+    # an SI run's figure then has axes without units: said too (a user's hunt)
+    np.save(m, np.zeros((41, 41)))
+    si = tmp_path / "si.parquet"
+    assert main(["run", "--units", "si", "--youngs-modulus", "1e6", "--poisson-ratio", "0.5", "--shape", "height_map",
+                 "--height-map", str(m), "--map-pixel-size", "1e-6", "--spacing", "1e-6", "--f-th", "0",
+                 "--max-indent", "1e-8", "--step", "1e-9", "-o", str(si), "-q", "--no-plot"]) in (0, 3)
+    m.unlink()
+    capsys.readouterr()
+    assert main(["plot", str(si), "-o", str(tmp_path / "si.png")]) == 0
+    assert "its lengths are in m and its forces in N, which the axes do not say" in capsys.readouterr().err
 
 
 def test_caption_numbers_are_rounded_before_they_are_written():

@@ -111,8 +111,11 @@ def load_run(path: Path):
             params = Params.from_dict(meta["params"]) if "params" in meta else None
     except (ParameterError, TypeError) as exc:
         # stored by another tfm version, or its height map has moved: say so, draw anyway
+        units = meta.get("units") or {}
+        si = (f"; its lengths are in {units.get('length')} and its forces in {units.get('force')}, which the "
+              "axes do not say" if units.get("system") == "si" else "")
         print(f"tfm: note: {path}: its parameter record does not rebuild ({exc}); drawn without "
-              "the caption and the analytical reference", file=sys.stderr)
+              f"the caption and the analytical reference{si}", file=sys.stderr)
         params = None
     # the name the table recorded, else the table's own <stem>.fields.nc (a table renamed
     # with its snapshots); _need_fields checks that they are this run's
