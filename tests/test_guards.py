@@ -382,3 +382,22 @@ def test_the_memory_estimate_counts_field_snapshots():
     p = Params(spacing=1 / 512, extent=1.0, f_th=0.0, max_indent=0.01, step=1e-3, shape="paraboloid")
     extra = guards.estimate_memory(p.replace(snapshots="events")) - guards.estimate_memory(p)
     assert extra == guards.BYTES_PER_SNAPSHOT_SPRING * guards.n_springs(p) >= 57 * guards.n_springs(p)
+
+
+def test_a_long_direct_run_is_announced_with_an_estimate(tmp_path, monkeypatch, capsys):
+    """Nothing was said before a direct run at 1/512 (about 3 hours) or 1/2048 (weeks): the
+    memory guard passed and the run started (a user's hunt). The estimate scales the
+    measured 1/256 curve as N^2.5; it is printed even with -q, and not for short runs."""
+    from tfm import guards
+    from tfm.cli import main
+
+    std = dict(k_th=0.02, shape="paraboloid", max_indent=0.05, operator="direct")
+    assert guards.direct_cost_note(Params.from_dict(dict(std, spacing="1/128"))) is None
+    assert guards.direct_cost_note(Params.from_dict(dict(std, spacing="1/512", operator="fft"))) is None
+    note = guards.direct_cost_note(Params.from_dict(dict(std, spacing="1/512")))
+    assert "with 94,249 springs expect roughly 3 hours" in note and "operator='fft'" in note
+    # the command line says it before the run (a small run made to look long)
+    monkeypatch.setattr(guards, "DIRECT_REFERENCE", (100, 1000.0))
+    assert main(["run", "--spacing", "1/16", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.05",
+                 "--step", "2.5e-3", "--operator", "direct", "-q", "--no-plot", "-o", str(tmp_path / "d.parquet")]) == 0
+    assert "tfm: note: operator='direct' sums every pair of springs" in capsys.readouterr().err

@@ -226,7 +226,7 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
     result and the table's and figure's paths."""
     import warnings
 
-    from .guards import estimate_memory
+    from .guards import direct_cost_note, estimate_memory
     from .progress import run_progress
     from .protocol import n_loading_steps
     from .results import fields_path_for
@@ -247,6 +247,9 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
                 print(f"tfm: note: {note}", file=sys.stderr)
     for note in notes:                    # stated before the run starts
         print(f"tfm: warning: {note}", file=sys.stderr)
+    cost = direct_cost_note(p)
+    if cost:                              # even with -q: hours may be at stake
+        print(f"tfm: note: {cost}", file=sys.stderr)
     with warnings.catch_warnings(record=True) as caught, run_progress(p, quiet=args.quiet) as progress:
         warnings.simplefilter("ignore", RunWarning)     # the summary's warnings are printed at the end
         warnings.simplefilter("always", CheckpointWarning)

@@ -235,6 +235,38 @@ def _status_bytes(key: str) -> float:
     return 0.0
 
 
+# The direct sum's cost: every pair of springs, in more CG iterations as the spacing
+# shrinks, about N^2.5 in all. Measured on the standard curve (paraboloid R = 1, K_th 0.02,
+# max_indent 0.05, step 2.5e-4) at spacing 1/256, 25,281 springs: 338 s on the 2-core VM
+# with 2 threads (2026-11-25; 1/128 took 8.5-25 s, 1/64 0.3-2.4 s on that noisy machine).
+DIRECT_REFERENCE = (25281, 338.0)
+COST_NOTE_SECONDS = 300.0
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} minutes"
+    if seconds < 2 * 86400:
+        return f"{seconds / 3600:.0f} hours"
+    return f"{seconds / 86400:.0f} days"
+
+
+def direct_cost_note(p) -> str | None:
+    """A note before a direct-sum run that would take more than a few minutes (a 1/512 run
+    started without a word and would have taken hours), or None."""
+    if p.operator != "direct" or p.kernel == "local":
+        return None
+    n, seconds = DIRECT_REFERENCE
+    estimate = seconds * (n_springs(p) / n) ** 2.5
+    if estimate < COST_NOTE_SECONDS:
+        return None
+    faster = "operator='fft' gives the same numbers (to 1e-12)" if p.layout == "square" else "operator='tree' is"
+    return (f"operator='direct' sums every pair of springs: with {n_springs(p):,} springs expect roughly "
+            f"{_duration(estimate)} on two cores (the standard curve at spacing 1/256, {n:,} springs, took "
+            f"{seconds / 60:.1f} minutes on a 2-core VM, and the cost grows about as N^2.5); {faster} "
+            "far faster")
+
+
 def contact_reached_note(p, max_n_contact: int) -> str | None:
     """After a run: the ``coarse`` guard on the contact the run reached (the estimate
     before it assumes a smooth body: a rough one can touch at a few springs only). The

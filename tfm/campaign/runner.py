@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from ..config import CHECKPOINT_EVERY
+from ..guards import direct_cost_note, n_springs
 from ..params import ParameterError
 from .spec import CampaignError, CampaignSpec, Run, load_spec
 from .store import CampaignStore
@@ -170,6 +171,12 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo and client is None:
             _check_memory(spec, todo, min(jobs, len(todo)))
+        costly = [(run, direct_cost_note(run.params)) for run in todo]
+        costly = [(run, note) for run, note in costly if note]
+        if costly:                           # even with quiet: hours may be at stake
+            run, note = max(costly, key=lambda rn: n_springs(rn[0].params))
+            print(f"campaign {spec.name}: {len(costly)} run{'s' if len(costly) > 1 else ''} of the direct sum "
+                  f"may take long; the largest, run {run.index}: {note}", file=sys.stderr)
         noted = [run for run in todo if run.notes]
         if noted and not quiet:
             for run in noted[:3]:
