@@ -407,3 +407,27 @@ def test_tfm_limit_out_that_is_a_file_is_refused(tmp_path, capsys):
     (tmp_path / "x").write_text("")
     assert main(["limit", "--analyse-only", "--out", str(tmp_path / "x")]) == 2
     assert f"tfm: error: out: {tmp_path / 'x'} is a file, not a folder" in capsys.readouterr().err
+
+
+def test_the_report_s_discussion_follows_its_numbers():
+    """The quick report said Figs. 4 and 5 "give slopes close to 4α − 3" with a Fig. 4 slope
+    of −2.603 ± 1.566, called the neighbors kernel's exponent the same as Boussinesq's while
+    its claim disagreed, and called the local kernel's limit confirmed whatever the numbers
+    (a user's hunt)."""
+    from tfm.paper.report import discussion
+
+    base = dict(alpha_boussinesq=0.74, boussinesq_spacings=(1 / 64, 1 / 256), boussinesq_ac_range=(8, 30),
+                alpha_boussinesq_gradient=3.9, fig5_slope=0.055, fig5_slope_half=0.067, fig5_slope_predicted=0.0,
+                fig5_drop_per_halving=(0.031, 0.043), fig5_spacings=(1 / 64, 1 / 256),
+                fig4_slope=-2.903, fig4_slope_half=0.278, fig4_slope_predicted=-3.0,
+                alpha_local=1.04, local_winkler_excess=[(1 / 16, 0.311), (1 / 32, 0.046), (1 / 64, 0.037)],
+                alpha_neighbors=0.73, alpha_neighbors_agrees=True)
+    full = "\n".join(discussion(base))
+    assert "The fitted slopes are Fig. 4 -2.903 ± 0.278 against -3; Fig. 5 +0.055 ± 0.067 against 0" in full
+    assert "close to 4α − 3 at α = 0 and 0.75" in full and "The fit agrees with α = 0.75" in full
+    assert "to +3.7 % at the finest: the runs approach the Winkler limit" in full
+    quick = "\n".join(discussion(dict(base, fig4_slope=-2.603, fig4_slope_half=1.566, alpha_neighbors_agrees=False,
+                                      local_winkler_excess=[(1 / 8, 0.05), (1 / 16, 0.07)])))
+    assert "Fig. 4 -2.603 ± 1.566 against -3" in quick and "not all close to 4α − 3" in quick
+    assert "The fit does not give 0.75 here" in quick and "do not show the limit" in quick
+    assert "confirmed" not in quick

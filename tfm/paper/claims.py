@@ -191,7 +191,8 @@ def _refinement(run, key: str, fig: str, predicted: float) -> Finding:
                           "F_max/(K_eff^2 R)": f_max / keff2 / radius,
                           "a_c/spacing": [theory.jkr_critical_radius(k_eff[x], radius) / x for x in s["p_spacing"]]})
     out = Finding(tables={key: table, key + "_ratios": ratios})
-    out.numbers = {key + "_slope": fit.exponent,
+    out.numbers = {key + "_slope": fit.exponent, key + "_slope_half": fit.half_width,
+                   key + "_slope_predicted": predicted,
                    key + "_drop_per_halving": (float((1 - ratios["ratio"]).min()), float((1 - ratios["ratio"]).max())),
                    key + "_spacings": (float(s["p_spacing"].max()), float(s["p_spacing"].min()))}
     dm = ", ".join(f"{v:.3g}" for v in sorted(set(s["r_max_indent"])))
@@ -309,6 +310,7 @@ def claims_kernels(run) -> Finding:
             _yes(ok) if kernel != "neighbors" else ("n/a; theory " + ("agrees" if ok else "disagrees"))))
         out.numbers[f"alpha_{kernel}"] = zc.alpha
         out.numbers[f"alpha_{kernel}_gradient"] = zc.gradient
+        out.numbers[f"alpha_{kernel}_agrees"] = ok
     bous = s[s["p_kernel"] == "boussinesq"]
     if len(bous):
         ac = [theory.jkr_critical_radius(theory.effective_toughness(f_th, h), r) / h
