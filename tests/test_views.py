@@ -733,3 +733,14 @@ def test_a_run_whose_unloading_was_capped_is_not_drawn_as_a_finished_one(tmp_pat
     assert "cap.parquet is a flagged run: unloading stopped at max_unload_steps" in capsys.readouterr().err
     # a finished run keeps its words
     assert "(pull-off" in plots.snapshot_title(snap, None, curve.iloc[:0])
+
+
+def test_a_caption_names_the_settings_that_moved_the_numbers():
+    """A run with self_term 3 and the single snap rule had the default run's caption, with a
+    pull-off 26 % lower (a user's hunt); settings at their default, or that do not apply,
+    stay out of it."""
+    base = dict(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05, step=1e-3)
+    plain = plots.run_caption(tfm.Params.from_dict(base))
+    moved = plots.run_caption(tfm.Params.from_dict(dict(base, self_term=3.0, snap_rule="single")))
+    assert moved == plain + ", self_term = 3, snap_rule = single"
+    assert "jitter" not in plots.run_caption(tfm.Params.from_dict(dict(base, layout="hexagonal", operator="tree")))

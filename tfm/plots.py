@@ -179,7 +179,26 @@ def run_caption(p) -> str:
         parts.append(f"{p.layout} layout")
     if p.operator != "fft":
         parts.append(f"{p.operator} operator" + (f" ($\\theta$ = {p.theta:g})" if p.operator == "tree" else ""))
+    parts += [f"{name} = {number(v) if isinstance(v, float) else v}" for name, v in _other_settings(p)]
     return ", ".join(parts)
+
+
+# settings that change the numbers and are named above only when they are not the default
+# (a self term of 3 and the single snap rule drew the default run's caption, with a
+# pull-off 26 % lower)
+CAPTION_SETTINGS = ("self_term", "snap_rule", "c_w", "neighbor_rings", "jitter", "seed", "extent", "extent_margin",
+                    "short_cutoff", "long_cutoff", "rolloff", "load_step", "tol")
+
+
+def _other_settings(p):
+    from .params import _DEFAULTS, APPLIES
+
+    for name in CAPTION_SETTINGS:
+        value = getattr(p, name)
+        rule = APPLIES.get(name)
+        if value == _DEFAULTS[name] or value is None or (rule is not None and not rule.applies(p)):
+            continue
+        yield name, value
 
 
 # Visible characters of 8-pt caption text per inch of figure width (DejaVu Sans averages
