@@ -496,8 +496,10 @@ def test_bad_view_arguments_exit_2_before_drawing(stored_run, tmp_path, capsys, 
 def test_the_fps_range_is_what_a_gif_can_store():
     from tfm.viewcli import GIF_MAX_FPS, ViewError, check_fps
 
+    from tfm.viewcli import gif_centiseconds
+
     check_fps(GIF_MAX_FPS, "a.gif")
-    assert int(int(1000 / GIF_MAX_FPS) / 10) >= 1          # Pillow's centiseconds at the limit
+    assert gif_centiseconds(GIF_MAX_FPS) >= 1                # a frame time at the limit
     with pytest.raises(ViewError):
         check_fps(GIF_MAX_FPS * 1.01, "a.gif")
     check_fps(120, "a.mp4")                                  # MP4 stores the rate itself
@@ -505,7 +507,7 @@ def test_the_fps_range_is_what_a_gif_can_store():
     # (OverflowError) after the old file had been truncated
     from tfm.viewcli import MIN_FPS
     check_fps(MIN_FPS, "a.gif")
-    assert int(1000 / MIN_FPS) / 10 <= 65535
+    assert gif_centiseconds(MIN_FPS) <= 65535
     for fps in (0.001, MIN_FPS * 0.99):
         with pytest.raises(ViewError):
             check_fps(fps, "a.gif")
@@ -744,3 +746,16 @@ def test_a_caption_names_the_settings_that_moved_the_numbers():
     moved = plots.run_caption(tfm.Params.from_dict(dict(base, self_term=3.0, snap_rule="single")))
     assert moved == plain + ", self_term = 3, snap_rule = single"
     assert "jitter" not in plots.run_caption(tfm.Params.from_dict(dict(base, layout="hexagonal", operator="tree")))
+
+
+def test_a_gif_s_frame_time_is_the_nearest_it_can_store_and_a_rate_it_cannot_is_said(stored_run, tmp_path, capsys):
+    """--fps 8 wrote 120 ms frames (int(1000 / fps) cut to whole centiseconds), and 60 and
+    100 fps made the same file, without a word (a user's hunt)."""
+    from PIL import Image
+
+    for fps, ms, note in ((10, 100, False), (8, 120, True), (60, 20, True)):
+        out = tmp_path / f"f{fps}.gif"
+        assert main(["animate", str(stored_run), "-o", str(out), "--fps", str(fps)]) == 0
+        assert Image.open(out).info["duration"] == ms
+        err = capsys.readouterr().err
+        assert ("stores frame times in hundredths of a second" in err) == note, err

@@ -276,6 +276,11 @@ def _animate(args) -> Path:
     curve, params, fpath = load_run(path)
     fields = _need_fields(path, fpath, params)
     n = animate(fields, curve, params, out, fps=args.fps, unload_only=not args.all_phases)
+    if out.suffix.lower() == ".gif":
+        played = 100.0 / gif_centiseconds(args.fps)
+        if abs(played - args.fps) > 0.01 * args.fps:
+            print(f"tfm: note: a GIF stores frame times in hundredths of a second: --fps {args.fps:g} plays at "
+                  f"{played:.3g} fps", file=sys.stderr)
     events = " (the run stored snapshots at its events only; --snapshots K stores every K-th step)" \
         if params is not None and params.snapshots == "events" else ""
     print(f"{n} frames{events}", file=sys.stderr)
@@ -295,9 +300,9 @@ def frame_steps(fields, curve, unload_only: bool = True) -> list[int]:
 
 
 ANIMATION_SUFFIXES = (".gif", ".mp4")
-# A GIF stores frame durations in whole centiseconds: above 100 fps the duration
-# (int(1000 / fps) ms) is 0, which viewers replace by their own default; the longest it
-# can store is 655.35 s. Below 0.01 fps (100 s a frame) nothing is an animation.
+# A GIF stores frame durations in whole centiseconds (gif_centiseconds): above 100 fps a
+# frame would last 0, which viewers replace by their own default; the longest it can store
+# is 655.35 s. Below 0.01 fps (100 s a frame) nothing is an animation.
 GIF_MAX_FPS = 100.0
 MIN_FPS = 0.01
 
@@ -396,8 +401,14 @@ def _write_animation(fields, curve, params, out, fps, steps, dpi) -> None:
             raise ViewError(f"ffmpeg failed to write {out.suffix} ({_ffmpeg_error(writer, exc)}); "
                             "write a .gif instead (-o anim.gif)") from None
     if frames:
-        frames[0].save(out, save_all=True, append_images=frames[1:], duration=int(1000 / fps), loop=0,
+        frames[0].save(out, save_all=True, append_images=frames[1:], duration=10 * gif_centiseconds(fps), loop=0,
                        format="GIF")
+
+
+def gif_centiseconds(fps: float) -> int:
+    """A GIF frame's time: whole hundredths of a second, the nearest to 1/fps (int(1000 / fps)
+    ms was cut to 12 cs at 8 fps, 8.33 fps played)."""
+    return max(1, round(100.0 / fps))
 
 
 def _ffmpeg_error(writer, exc) -> str:
