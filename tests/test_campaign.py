@@ -1198,3 +1198,18 @@ def test_a_campaign_whose_height_map_is_gone_says_why_it_needs_it(tmp_path, caps
     assert tfm_main(["campaign", "status", str(path)]) == 2
     err = capsys.readouterr().err
     assert "height_map: no such file" in err and "a campaign needs its height maps to know its runs" in err
+
+
+def test_campaign_list_exits_2_on_an_invalid_file_and_a_bom_is_named(tmp_path, capsys):
+    """An invalid file was listed as INVALID with exit 0, and a file saved with a byte order
+    mark was 'not valid TOML: Invalid statement (at line 1, column 1)' (a user's hunt)."""
+    from tfm.cli import main
+
+    good = SMOKE.read_text()
+    (tmp_path / "good.toml").write_text(good)
+    assert main(["campaign", "list", "--dir", str(tmp_path), "--results-dir", str(tmp_path / "r")]) == 0
+    (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + good.replace('name = "smoke"', 'name = "bom"').encode())
+    capsys.readouterr()
+    assert main(["campaign", "list", "--dir", str(tmp_path), "--results-dir", str(tmp_path / "r")]) == 2
+    out = capsys.readouterr().out
+    assert "bom" in out and "byte order mark (BOM)" in out and "good" in out

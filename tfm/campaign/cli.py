@@ -189,11 +189,13 @@ def cmd_list(args) -> int:
     # terminal's width (the whole of it is in the file, and in a pipe)
     width = max((len(path.stem) for path in files), default=0)
     columns = shutil.get_terminal_size().columns if sys.stdout.isatty() else None
+    invalid = 0
     for path in files:
         try:
             spec = load_spec(path)
         except CampaignError as exc:
             print(f"{path.stem:{width}s} INVALID: {exc}")
+            invalid += 1
             continue
         store = CampaignStore.for_spec(spec, args.results_dir)
         if store.source_conflict(spec):
@@ -204,7 +206,7 @@ def cmd_list(args) -> int:
             progress = f"{st.total:4d} runs {len(st.done):4d} done {len(st.failed):3d} failed"
         line = f"{path.stem:{width}s} {progress}  " + " ".join(spec.description.split())
         print(line if columns is None or len(line) <= columns else line[:columns - 3] + "...")
-    return 0
+    return 2 if invalid else 0            # a script sees an invalid file (exit 0 hid it)
 
 
 def cmd_expand(args) -> int:

@@ -103,6 +103,11 @@ def load_spec(path: str | Path, max_runs: int | None = None) -> CampaignSpec:
         raise CampaignError(f"{path}: no such campaign file") from None
     except OSError as exc:
         raise CampaignError(f"{path}: cannot read the campaign file: {exc.strerror}") from None
+    if raw.startswith(b"\xef\xbb\xbf"):
+        # an editor's byte order mark: TOML forbids it, and the parser's message only
+        # pointed at line 1, column 1
+        raise CampaignError(f"{path}: not valid TOML: the file starts with a UTF-8 byte order mark (BOM), which "
+                            "TOML does not allow; save it as UTF-8 without BOM")
     try:
         data = tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

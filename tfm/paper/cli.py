@@ -15,7 +15,8 @@ def add_paper_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--quick", action="store_true", help="twice the spacing and step: a pipeline check")
     ap.add_argument("--results-dir", default=None, help="campaign tables (default results, or results/quick)")
     ap.add_argument("--out", default=None, help="figures and REPORT.md (default results/paper, or results/quick/paper)")
-    ap.add_argument("-q", "--quiet", action="store_true")
+    ap.add_argument("-q", "--quiet", action="store_true",
+                    help="no progress of the campaigns (the claims table is still printed: it is the result)")
 
 
 def add_limit_arguments(ap: argparse.ArgumentParser) -> None:
@@ -34,7 +35,8 @@ def add_limit_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--out", default="results/limit",
                     help="figure, REPORT.md and the kept points, points.csv, read from there (or, when it has "
                          "none, from results/limit) and rewritten (default results/limit)")
-    ap.add_argument("-q", "--quiet", action="store_true")
+    ap.add_argument("-q", "--quiet", action="store_true",
+                    help="no progress of the campaigns (the claims table is still printed: it is the result)")
 
 
 def cmd_paper(args) -> int:
