@@ -429,14 +429,10 @@ def test_the_tfm_process_keeps_openblas_to_one_thread_unless_told(given, expecte
     assert out.stdout.splitlines()[-1] == f"BLAS {expected}", out.stdout[-300:] + out.stderr
 
 
-def test_another_runs_checkpoint_is_not_discarded_without_overwrite(tmp_path, capsys):
-    """A killed run left its state beside the table; a run with other parameters and the
-    same -o set that state aside and removed it without a word (hours of work, for a long
-    run). Now it is refused; with --overwrite it is discarded, saying so."""
+def _killed_run_checkpoint(ckpt):
+    """The saved state of a run killed at its 15th step (k_th 0.02 at 1/32), as bytes."""
     import tfm
 
-    out = tmp_path / "kk.parquet"
-    ckpt = tmp_path / "kk.checkpoint.npz"
     seen = []
 
     def stop(rec):
@@ -447,7 +443,15 @@ def test_another_runs_checkpoint_is_not_discarded_without_overwrite(tmp_path, ca
     with pytest.raises(KeyboardInterrupt):
         tfm.simulate(spacing=1 / 32, k_th=0.02, shape="paraboloid", max_indent=0.05, step=2.5e-3,
                      checkpoint=ckpt, checkpoint_every=0, progress=stop)
-    saved = ckpt.read_bytes()
+    return ckpt.read_bytes()
+
+
+def test_another_runs_checkpoint_is_not_discarded_without_overwrite(tmp_path, capsys):
+    """A killed run left its state beside the table; a run with other parameters and the
+    same -o set that state aside and removed it without a word (hours of work, for a long
+    run). Now it is refused; with --overwrite it is discarded, saying so."""
+    out, ckpt = tmp_path / "kk.parquet", tmp_path / "kk.checkpoint.npz"
+    saved = _killed_run_checkpoint(ckpt)
     other = ["run", "--spacing", "1/32", "--k-th", "0.03", "--shape", "paraboloid", "--max-indent", "0.05",
              "--step", "2.5e-3", "--no-plot", "-o", str(out)]
     capsys.readouterr()
@@ -755,21 +759,8 @@ def test_a_run_without_checkpoints_does_not_bury_another_runs_saved_state(tmp_pa
     its table beside another killed run's saved state without a word, and that state was
     later continued over the new table (a user's hunt). Now it is refused as for a
     checkpointed run; with --overwrite the state is discarded once the table is written."""
-    import tfm
-
-    out = tmp_path / "kk.parquet"
-    ckpt = tmp_path / "kk.checkpoint.npz"
-    seen = []
-
-    def stop(rec):
-        seen.append(rec)
-        if len(seen) == 15:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        tfm.simulate(spacing=1 / 32, k_th=0.02, shape="paraboloid", max_indent=0.05, step=2.5e-3,
-                     checkpoint=ckpt, checkpoint_every=0, progress=stop)
-    saved = ckpt.read_bytes()
+    out, ckpt = tmp_path / "kk.parquet", tmp_path / "kk.checkpoint.npz"
+    saved = _killed_run_checkpoint(ckpt)
     base = ["run", "--spacing", "1/32", "--k-th", "0.03", "--shape", "paraboloid", "--max-indent", "0.05",
             "--step", "2.5e-3", "--no-plot", "-o", str(out)]
     for extra in (["--snapshots", "events"], ["--no-checkpoints"], ["--control", "force"]):
