@@ -729,12 +729,12 @@ def test_a_run_whose_unloading_was_capped_is_not_drawn_as_a_finished_one(tmp_pat
     assert plots.INCOMPLETE in fig._suptitle.get_text()
     fields = Fields(tmp_path / "cap.fields.nc")
     snap = fields.snapshot(fields.event_step("pull_off"))
-    assert "(largest tension so far" in plots.snapshot_title(snap, None, curve)
+    assert "(largest tension so far" in plots.snapshot_title(snap, None, plots.unload_incomplete(curve))
     capsys.readouterr()
     assert main(["show", str(out), "--step", "pull_off"]) == 0
     assert "cap.parquet is a flagged run: unloading stopped at max_unload_steps" in capsys.readouterr().err
     # a finished run keeps its words
-    assert "(pull-off" in plots.snapshot_title(snap, None, curve.iloc[:0])
+    assert "(pull-off" in plots.snapshot_title(snap, None, plots.unload_incomplete(curve.iloc[:0]))
 
 
 def test_a_caption_names_the_settings_that_moved_the_numbers():

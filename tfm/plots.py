@@ -243,19 +243,14 @@ def reference_label(p) -> str | None:
 
 def _save(fig, path):
     """Save through a temporary name beside ``path``: an interrupted or failed save leaves
-    an earlier figure whole, and no stray temporary file (tfm show wrote in place)."""
-    import os
+    an earlier figure whole (tfm show wrote in place)."""
+    from .results import through_temporary
 
     fold_offsets(fig)
     if path is not None:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-        try:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        with through_temporary(path, keep_suffix=True) as tmp:
             fig.savefig(tmp, dpi=DPI)
-            os.replace(tmp, path)
-        finally:
-            tmp.unlink(missing_ok=True)
     return fig
 
 
@@ -498,8 +493,9 @@ def unload_incomplete(curve) -> bool:
 INCOMPLETE = "unloading stopped with springs in contact (max_unload_steps): the pull-off may lie further"
 
 
-def snapshot_title(snap, params=None, curve=None) -> str:
-    text = dict(EVENT_TEXT, pull_off="largest tension so far") if unload_incomplete(curve) else EVENT_TEXT
+def snapshot_title(snap, params=None, incomplete: bool = False) -> str:
+    """``incomplete``: the run's unloading was capped (``unload_incomplete``)."""
+    text = dict(EVENT_TEXT, pull_off="largest tension so far") if incomplete else EVENT_TEXT
     events = [text.get(e, "") for e in snap["event"].split(",") if e in text]
     ev = f" ({', '.join(events)})" if events else ""
     m, N = unit_suffixes(params)
@@ -538,7 +534,7 @@ def plot_contact_map(fields, snap, curve=None, params=None, path=None):
         marker = draw_curve_marker_panel(axes[1], curve, params)
         marker.set_data([-snap["d"]], [snap["force"]])
     head = wrap_caption(run_caption(params), fig.get_figwidth()) + "\n" if params is not None else ""
-    fig.suptitle(head + snapshot_title(snap, params, curve), fontsize=8)
+    fig.suptitle(head + snapshot_title(snap, params, unload_incomplete(curve)), fontsize=8)
     return _save(fig, path)
 
 

@@ -6,6 +6,7 @@ n_entered, rounds, solver_iters.
 """
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import hashlib
 import json
@@ -218,6 +219,22 @@ def remove_dead_files(folder: Path, globs: list[str], pattern, min_age: float = 
     return removed
 
 
+@contextlib.contextmanager
+def through_temporary(path: str | os.PathLike, keep_suffix: bool = False):
+    """Yield a temporary name beside ``path`` to write to, then move it into place: a killed
+    or failed write leaves an earlier file whole, and no stray temporary file. The name is
+    ``.<name>.<pid>.tmp``, or ``.<stem>.<pid>.tmp<suffix>`` for writers that take the
+    format from the suffix (figures); ``remove_dead_temporaries`` knows both."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}" if keep_suffix
+                         else f".{path.name}.{os.getpid()}.tmp")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def remove_dead_temporaries(*outputs: str | os.PathLike) -> list[Path]:
     """Remove what a killed tfm process (kill -9, a crash) left beside the outputs: the
     temporary files it wrote them through, named after the output and its pid
@@ -392,14 +409,10 @@ def write_table(df, path, params: Params | None = None, prov=None, summary=None,
     # frame written back with to_parquet keeps it (pandas drops the tfm.* keys)
     meta[PANDAS_ATTRS] = json.dumps({"tfm": _decode(meta)}, sort_keys=True).encode()
     table = table.replace_schema_metadata(meta)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with through_temporary(path) as tmp:
         # page checksums: a flipped bit on disk is found when the file is read
         # (read_checked), where it was read as another number
         pq.write_table(table, tmp, write_page_checksum=True)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)          # no stray temporary file, whatever happened
     return path
 
 

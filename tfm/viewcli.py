@@ -8,7 +8,6 @@ stored field snapshots (``<stem>.fields.nc``, see tfm.snapshots).
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import subprocess
 import sys
@@ -329,14 +328,12 @@ def animate(fields, curve, params, out, fps: float = 8.0, unload_only: bool = Tr
     steps = frame_steps(fields, curve, unload_only)
     if not steps:
         raise ViewError(f"{fields.path}: no snapshots to animate")
+    from .results import through_temporary
+
     # through a temporary file beside it: a failed write leaves an earlier animation whole
     out.parent.mkdir(parents=True, exist_ok=True)
-    final, out = out, out.with_name(f".{out.stem}.{os.getpid()}.tmp{out.suffix}")
-    try:
-        _write_animation(fields, curve, params, out, fps, steps, dpi)
-        os.replace(out, final)
-    finally:
-        out.unlink(missing_ok=True)
+    with through_temporary(out, keep_suffix=True) as tmp:
+        _write_animation(fields, curve, params, tmp, fps, steps, dpi)
     return len(steps)
 
 
@@ -363,6 +360,7 @@ def _write_animation(fields, curve, params, out, fps, steps, dpi) -> None:
         marker = plots.draw_curve_marker_panel(ax_curve, curve, params)
         head = plots.wrap_caption(plots.run_caption(params), fig.get_figwidth()) + "\n" if params is not None else ""
         title = fig.suptitle(head, fontsize=8)
+        incomplete = plots.unload_incomplete(curve)
         cmap = None
         writer = _mp4_writer(fig, out, fps, dpi) if out.suffix.lower() == ".mp4" else None
         background = None
@@ -375,7 +373,7 @@ def _write_animation(fields, curve, params, out, fps, steps, dpi) -> None:
                     plots.fold_offsets(fig)          # the axes are fixed: as tfm show draws them
                 else:
                     cmap.update(snap)
-                title.set_text(head + plots.snapshot_title(snap, params, curve))
+                title.set_text(head + plots.snapshot_title(snap, params, incomplete))
                 marker.set_data([-snap["d"]], [snap["force"]])
                 if writer is not None:
                     writer.grab_frame()
