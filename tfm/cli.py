@@ -169,27 +169,21 @@ def _checkpoint_options(args, p: Params, out: Path) -> dict:
     snapshots saves its state beside the table every CHECKPOINT_EVERY seconds, and the same
     command continues a killed run. Asking for checkpoints where they cannot serve is refused."""
     path = checkpoint_path_for(out)
-    if args.no_checkpoints:
-        if args.checkpoint_every is not None:
-            raise ParameterError("checkpoint-every: give it or --no-checkpoints, not both")
-        # a run without checkpoints that replaced the table beside another run's saved
-        # state left that state to be continued over its table, without a word
-        _check_foreign_checkpoint(path, p, args.overwrite)
-        return {}
+    if args.no_checkpoints and args.checkpoint_every is not None:
+        raise ParameterError("checkpoint-every: give it or --no-checkpoints, not both")
     from .checkpoint import check_every, why_not
     from .config import CHECKPOINT_EVERY
 
-    reason = why_not(p)
-    if args.checkpoint_every is None:
-        every = CHECKPOINT_EVERY
-        if reason:
-            _check_foreign_checkpoint(path, p, args.overwrite)
-            return {}
-    else:
-        every = check_every(args.checkpoint_every, "checkpoint-every")
-        if reason:
-            raise ParameterError(f"checkpoint-every: {reason}")
+    every = CHECKPOINT_EVERY if args.checkpoint_every is None else check_every(args.checkpoint_every,
+                                                                                "checkpoint-every")
+    reason = None if args.no_checkpoints else why_not(p)
+    if args.checkpoint_every is not None and reason:
+        raise ParameterError(f"checkpoint-every: {reason}")
+    # with checkpoints or without: a run that replaced the table beside another run's saved
+    # state left that state to be continued over its table, without a word
     _check_foreign_checkpoint(path, p, args.overwrite)
+    if args.no_checkpoints or reason:
+        return {}
     # kept until the table is written (_run_and_write): a stop while it is written would
     # otherwise find neither table nor checkpoint
     return {"checkpoint": path, "checkpoint_every": every, "replace_checkpoint": args.overwrite,

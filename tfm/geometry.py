@@ -43,11 +43,16 @@ def square_grid(spacing: float, half_width: float) -> Layout:
     return Layout(x, y, area, spacing, (2 * m + 1, 2 * m + 1), _edge_mask(x, y, hw + spacing, spacing))
 
 
+def row_pitch(spacing: float) -> float:
+    """Distance between the rows of the hexagonal (triangular) lattice."""
+    return spacing * math.sqrt(3.0) / 2.0
+
+
 def hexagonal_grid(spacing: float, half_width: float) -> Layout:
     """Triangular lattice with nearest-neighbour distance ``spacing``.
 
     Each spring's tributary (Voronoi) area is sqrt(3)/2 spacing^2."""
-    dy = spacing * math.sqrt(3.0) / 2.0
+    dy = row_pitch(spacing)
     rows = int(math.ceil(half_width / dy))
     cols = int(math.ceil(half_width / spacing)) + 1
     xs, ys = [], []
@@ -79,7 +84,7 @@ def layout_reach(p: Params, half_width: float) -> float:
     lie along x or y (the grids above: square rows stop at ceil(hw / spacing) spacings,
     hexagonal rows at ceil(hw / dy) dy, jittered springs up to jitter spacings further)."""
     if p.layout == "hexagonal":
-        dy = p.spacing * math.sqrt(3.0) / 2.0
+        dy = row_pitch(p.spacing)
         return max(half_width, math.ceil(half_width / dy) * dy)
     reach = math.ceil(half_width / p.spacing - 1e-9) * p.spacing
     return reach + (p.jitter * p.spacing if p.layout == "jittered" else 0.0)
@@ -89,7 +94,7 @@ def largest_half_width(p: Params, reach: float) -> float:
     """The largest half-width on the layout's own steps whose springs stay within
     ``reach`` of the centre (``layout_reach`` <= reach), or 0."""
     if p.layout == "hexagonal":
-        dy = p.spacing * math.sqrt(3.0) / 2.0
+        dy = row_pitch(p.spacing)
         k = math.floor(reach / dy + 1e-9)
         hw = k * dy
         while hw > 0 and math.ceil(hw / dy) > k:     # k dy / dy may round above k

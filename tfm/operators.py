@@ -24,7 +24,8 @@ from .geometry import Layout
 from .kernels import fft as fftk
 from .kernels.compliance import BOUSSINESQ, LOCAL, NEIGHBORS, cutoff_squared
 from .kernels.ops import (PRE_DIAGONAL, PRE_FFT, PRE_NONE, PRE_STENCIL, DirectData, FFTData, PreData,
-                          cached_symbol, new_symbol_cache, precondition, restrict_pre, start_threads)
+                          SparseData, TreeData, cached_symbol, new_symbol_cache, precondition, restrict_pre,
+                          start_threads)
 from .kernels.direct import direct_sum
 from .kernels.grid import index_box, stencil_apply
 from .params import ParameterError, Params
@@ -159,15 +160,17 @@ class DirectOperator:
 
 #: the classes of the operators' compiled data (tfm.kernels.ops), which the compiled loop
 #: is specialised on
-DATA_NAMES = ("FFTData", "DirectData", "TreeData", "SparseData")
+DATA_CLASSES = (FFTData, DirectData, TreeData, SparseData)
 
 
 def compiled_data_name(p: Params) -> str:
-    """The class of ``make_operator(p, ...).compiled()``: the tree operator hands a neighbour
-    list (SparseData) to the loop for the short-ranged kernels."""
-    if p.operator in ("fft", "direct"):
-        return {"fft": "FFTData", "direct": "DirectData"}[p.operator]
-    return "TreeData" if p.kernel == "boussinesq" else "SparseData"
+    """The class name of ``make_operator(p, ...).compiled()``: the tree operator hands a
+    neighbour list (SparseData) to the loop for the short-ranged kernels."""
+    if p.operator == "fft":
+        return FFTData.__name__
+    if p.operator == "direct":
+        return DirectData.__name__
+    return (TreeData if p.kernel == "boussinesq" else SparseData).__name__
 
 
 def make_operator(p: Params, spec: KernelSpec, layout: Layout, symbol=None):

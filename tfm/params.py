@@ -829,6 +829,7 @@ def _validate_surface_relations(p: Params) -> None:
                                  f"between the cutoffs {short:g} and {p.long_cutoff:g} with rolloff = 0, so the "
                                  "surface would have no roughness; widen the band or give rolloff > 0")
 
+
 def _check_map_covers(p: Params) -> None:
     """A height map covers the grid (before the spacing is checked against the grid: a
     map too small for one spring a side is the map's fault, not the spacing's)."""

@@ -61,8 +61,9 @@ def cold_kernels(control: str = "displacement", data: str | None = None) -> list
 
     Reads each dispatcher's cache index, which Numba empties when the source changed.
     Returns [] if the check itself is not possible (another Numba version)."""
-    from .operators import DATA_NAMES
+    from .operators import DATA_CLASSES
 
+    names = [cls.__name__ for cls in DATA_CLASSES]
     cold = []
     try:
         for disp in {id(d): d for d in _dispatchers()}.values():
@@ -71,7 +72,7 @@ def cold_kernels(control: str = "displacement", data: str | None = None) -> list
             cache = getattr(disp, "_cache", None)
             index = cache._cache_file._load_index() if hasattr(cache, "_cache_file") else {}
             sigs = [str(key[0]) for key in index]
-            by_data = [s for s in sigs if any(f"{name}(" in s for name in DATA_NAMES)]
+            by_data = [s for s in sigs if any(f"{name}(" in s for name in names)]
             if not sigs or (data is not None and by_data and not any(f"{data}(" in s for s in by_data)):
                 cold.append(disp.py_func.__qualname__)
     except (AttributeError, ImportError, OSError, TypeError, IndexError):

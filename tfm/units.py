@@ -82,12 +82,11 @@ COLUMN_UNITS["si"]["columns"] = COLUMN_UNITS["paper"]["columns"]
 _PARAMETER_LENGTHS = ("spacing", "radius", "extent", "max_indent", "step", "rms_height",
                       "short_cutoff", "long_cutoff", "map_pixel_size")
 _PARAMETER_FORCES = ("f_th", "max_load", "load_step")
-COLUMN_UNITS["paper"]["parameters"] = {**dict.fromkeys(_PARAMETER_LENGTHS, "length"),
-                                       **dict.fromkeys(_PARAMETER_FORCES, "force"), "k_th": "k_th"}
+_DIMENSIONED = {**dict.fromkeys(_PARAMETER_LENGTHS, "length"), **dict.fromkeys(_PARAMETER_FORCES, "force")}
+COLUMN_UNITS["paper"]["parameters"] = {**_DIMENSIONED, "k_th": "k_th"}
 COLUMN_UNITS["paper"]["k_th"] = "F*/L*^(2 alpha)"
-COLUMN_UNITS["si"]["parameters"] = {**dict.fromkeys(_PARAMETER_LENGTHS, "length"),
-                                    **dict.fromkeys(_PARAMETER_FORCES, "force"),
-                                    "youngs_modulus": "modulus", "work_of_adhesion": "work_of_adhesion"}
+COLUMN_UNITS["si"]["parameters"] = {**_DIMENSIONED, "youngs_modulus": "modulus",
+                                    "work_of_adhesion": "work_of_adhesion"}
 COLUMN_UNITS["si"]["modulus"] = "Pa"
 COLUMN_UNITS["si"]["work_of_adhesion"] = "J/m^2"
 FORCE_COLUMNS = tuple(k for k, dim in COLUMN_UNITS["paper"]["columns"].items() if dim == "force")

@@ -171,8 +171,7 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo and client is None:
             _check_memory(spec, todo, min(jobs, len(todo)))
-        costly = [(run, direct_cost_note(run.params)) for run in todo]
-        costly = [(run, note) for run, note in costly if note]
+        costly = [(run, note) for run in todo if (note := direct_cost_note(run.params))]
         if costly:                           # even with quiet: hours may be at stake
             run, note = max(costly, key=lambda rn: n_springs(rn[0].params))
             print(f"campaign {spec.name}: {len(costly)} run{'s' if len(costly) > 1 else ''} of the direct sum "
