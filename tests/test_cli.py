@@ -223,6 +223,17 @@ def test_a_failed_run_ends_the_figure_worker(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_the_figure_worker_draws_without_pandas():
+    """The worker is on `tfm run`'s critical path at 1/128: its warm-up ended after the
+    curve, and importing pandas was 0.2 s of it. It draws from the curve's own columns
+    (tfm.plots.curve_arrays); the test above checks that the figure is the same."""
+    code = ("import json, sys; from tfm import plot_worker as w; w._warm(json.dumps({'spacing': 0.0625})); "
+            "print('pandas' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env=ENV)
+    assert out.stdout.strip() == "False"
+
+
 def test_large_grids_get_no_figure_worker():
     from tfm.guards import n_springs
     from tfm.plot_worker import MAX_SPRINGS, start_worker

@@ -1,6 +1,6 @@
 """`tfm run`'s figure, drawn by a second process while the first computes the curve.
 
-Matplotlib, pandas and a figure's first drawing (fonts, the math-text parser) take about as
+Matplotlib and a figure's first drawing (fonts, the math-text parser) take about as
 long as a 1/128 curve, and such a curve runs on one core. So `tfm run` starts this worker
 before the run. The worker imports and draws a throwaway figure meanwhile, then waits for
 one line on stdin: the curve's columns and a temporary path for the figure, sent as soon
@@ -25,7 +25,7 @@ from pathlib import Path
 WAIT = 120.0
 DONE = "done"
 # Larger grids get no worker: their curves take 15 s and more, against which the 0.3-0.5 s
-# saved do not count, and the idle worker would hold its 150 MiB (Matplotlib and pandas
+# saved do not count, and the idle worker would hold its 150 MiB (Matplotlib
 # loaded) through the whole run. 65536 springs: a 1/256 standard curve has 159^2, 1/512 307^2.
 MAX_SPRINGS = 65536
 
@@ -124,23 +124,19 @@ def _warm(params_json: str):
     import tempfile
 
     import numpy as np
-    import pandas as pd
 
     from . import theory
     from .params import Params
     from .plots import plot_curve
     from .units import force_scale
-    from .results import CURVE_COLUMNS
 
     try:
         p = Params.from_dict(json.loads(params_json))
     except Exception:                    # the real figure will say what is wrong
         p = None
     indent = np.r_[np.linspace(0.0, 1.0, 8), np.linspace(1.0, -0.1, 8)] * (p.delta_max if p else 0.05)
-    curve = pd.DataFrame({c: np.zeros(indent.size) for c in CURVE_COLUMNS})
-    curve["phase"] = ["load"] * 8 + ["unload"] * 8
-    curve["indent"], curve["d"], curve["force"] = indent, -indent, indent
-    curve["contact_radius"], curve["n_contact"] = np.abs(indent), 1
+    curve = {"phase": np.array(["load"] * 8 + ["unload"] * 8), "indent": indent, "force": indent,
+             "contact_radius": np.abs(indent), "n_contact": np.ones(indent.size, dtype=np.int64)}
     if p is not None and p.shape != "height_map":
         # loads of the size the run's will have (its reference curve, and a pull-off of
         # the same order): the real figure's tick labels are then mostly measured already
@@ -160,11 +156,11 @@ def main(params_json: str) -> int:
     job = json.loads(line)
     from .params import Params
     from .plots import plot_curve
-    from .results import curve_frame
 
     params = Params.from_dict(json.loads(params_json))
-    # the figure `tfm plot` would draw from the table: the same columns and record
-    plot_curve(curve_frame(job["columns"]), params, Path(job["plot"]), reuse=fig)
+    # the figure `tfm plot` would draw from the table: the same columns and record (as
+    # NumPy arrays: pandas is not imported here, tfm.plots.curve_arrays)
+    plot_curve(job["columns"], params, Path(job["plot"]), reuse=fig)
     return 0
 
 
@@ -179,6 +175,6 @@ if __name__ == "__main__":
     if status == 0:
         print(DONE, flush=True)
     sys.stderr.flush()
-    # the figure is written and renamed: skip the interpreter's teardown of Matplotlib and
-    # pandas (0.2 s), which tfm run would otherwise wait for
+    # the figure is written and renamed: skip the interpreter's teardown of Matplotlib
+    # (0.2 s), which tfm run would otherwise wait for
     os._exit(status)
