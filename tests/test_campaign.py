@@ -120,7 +120,13 @@ BASE = 'name = "bad"\n[base]\nspacing = "1/32"\nk_th = 0.02\nshape = "paraboloid
     (BASE + "[sweep]\nkernel = ['local', 'bousinesq']\n", ["run 1", "kernel: unknown value", "did you mean 'boussinesq'"]),
     (BASE + "[sweep]\nstep = ['1/0']\n", ["step", "cannot read '1/0' as a number"]),
     ("descripton = 'x'\n" + BASE, ["unknown top-level key 'descripton'", "did you mean 'description'"]),
-    (BASE + "description = 'x'\n", ["[base]: unknown parameter 'description'", "must come before the first"]),
+    (BASE + "description = 'x'\n", ["[base]: 'description' is a top-level key", "before the first [table]"]),
+    # a top-level key after a table: it said "unknown parameter 'sweep' (did you mean
+    # 'step'?)", and "[sweep] max_runs: a swept parameter needs a list of values"
+    (BASE + "sweep = [1]\n", ["[base]: 'sweep' is a top-level key", "or as a table of its own, [sweep]"]),
+    (BASE + "[sweep]\nalpha = [0.5]\nmax_runs = 3\n", ["[sweep]: 'max_runs' is a top-level key",
+                                                        "before the first [table]"]),
+    (BASE + "[[zip]]\nalpha = [0.5]\nzip = 3\n", ["[[zip]] #1: 'zip' is a top-level key", "[[zip]]"]),
     # it said "name: expected a folder-safe name ..., got None"
     (BASE.replace('name = "bad"\n[base]\n', '[base]\nname = "bad"\n'),
      ["name: found inside [base]", "must come before the first [table]"]),

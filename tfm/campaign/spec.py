@@ -47,6 +47,23 @@ else:  # pragma: no cover - python 3.10
     import tomli as tomllib
 
 TOP_LEVEL_KEYS = ("name", "description", "max_runs", "base", "sweep", "zip")
+# the top-level keys that are tables of parameters
+TABLE_KEYS = ("base", "sweep", "zip")
+
+
+def _no_top_level_keys(table, section: str, where: str) -> None:
+    """Refuse a top-level key found inside a table: TOML puts every key written after a
+    [table] header into that table ("[base]: unknown parameter 'sweep' (did you mean
+    'step'?)" and "[sweep] max_runs: ... needs a list" misled)."""
+    if not isinstance(table, Mapping):
+        return
+    for key in table:
+        if key in TOP_LEVEL_KEYS:
+            own = f", or as a table of its own, {'[[zip]]' if key == 'zip' else f'[{key}]'}" \
+                if key in TABLE_KEYS else ""
+            raise CampaignError(f"{where}: {section}: {key!r} is a top-level key, not a parameter: TOML "
+                                f"puts every key written after a [table] header into that table; write "
+                                f"it before the first [table] of the file{own}")
 # Expanding and validating costs ~0.2 ms of CPU a run (10,000 runs: 2.0 s), so the
 # default answers within seconds; a larger campaign must say it means it (max_runs = N).
 DEFAULT_MAX_RUNS = 10_000
@@ -145,6 +162,8 @@ def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>", max_runs:
     if not isinstance(description, str):
         raise CampaignError(f"{where}: description: expected a string, got {description!r}")
 
+    _no_top_level_keys(data.get("base"), "[base]", where)
+    _no_top_level_keys(data.get("sweep"), "[sweep]", where)
     base = _table(data.get("base", {}), "[base]", where)
     sweep = {k: _axis(v, f"[sweep] {k}", where) for k, v in _table(data.get("sweep", {}), "[sweep]", where).items()}
     raw_zips = data.get("zip", [])
@@ -155,6 +174,7 @@ def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>", max_runs:
     zips = []
     for g, group in enumerate(raw_zips):
         label = f"[[zip]] #{g + 1}"
+        _no_top_level_keys(group, label, where)
         group = {k: _axis(v, f"{label} {k}", where) for k, v in _table(group, label, where).items()}
         if not group:
             raise CampaignError(f"{where}: {label}: empty; list at least one parameter")
