@@ -64,9 +64,12 @@ def _no_top_level_keys(table, section: str, where: str) -> None:
             raise CampaignError(f"{where}: {section}: {key!r} is a top-level key, not a parameter: TOML "
                                 f"puts every key written after a [table] header into that table; write "
                                 f"it before the first [table] of the file{own}")
+
+
 # Expanding and validating costs ~0.2 ms of CPU a run (10,000 runs: 2.0 s), so the
 # default answers within seconds; a larger campaign must say it means it (max_runs = N).
 DEFAULT_MAX_RUNS = 10_000
+EXPAND_SECONDS = 2e-4
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
 
 
@@ -211,6 +214,10 @@ def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>", max_runs:
                                     "set it in one place")
             seen[key] = section
 
+    if count > DEFAULT_MAX_RUNS:
+        # confirmed, but a million runs take minutes to check: not in silence
+        print(f"tfm: note: {where}: checking the parameters of {count:,} runs (about "
+              f"{count * EXPAND_SECONDS:,.0f} s on a laptop)", file=sys.stderr, flush=True)
     runs = tuple(_expand(base, sweep, zips, where))
     by_id: dict[str, Run] = {}
     for run in runs:
