@@ -175,6 +175,7 @@ def test_units_parameters_sweep_in_a_campaign():
     (dict(k_th_coefficient=-2), "k_th_coefficient: must be > 0"),
     (dict(k_th_coefficient="limit", self_term=3.0), "k_th_coefficient: 'limit' is measured only for self_term"),
     (dict(k_th_coefficient="limit", kernel="neighbors"), "k_th_coefficient: 'limit' was measured with the boussinesq"),
+    (dict(k_th_coefficient="limit", layout="hexagonal"), "k_th_coefficient: 'limit' was measured on the square layout"),
     (dict(kernel="local"), "kernel: units='si' needs"),
     (dict(units="cgs"), "units: unknown value 'cgs'"),
     # named in paper units (1.19e-10 for 5e-4 N) by the record's paper-units twin

@@ -861,6 +861,9 @@ def _validate_units(p: Params) -> None:
         if p.kernel != "boussinesq":
             raise ParameterError(f"k_th_coefficient: 'limit' was measured with the boussinesq kernel, "
                                  f"not {p.kernel!r}; give the coefficient as a number")
+        if p.layout != "square":
+            raise ParameterError(f"k_th_coefficient: 'limit' was measured on the square layout, not "
+                                 f"{p.layout!r}; give the coefficient as a number")
         try:
             coefficient = limit_coefficient(p.self_term)
         except ValueError as e:
