@@ -83,6 +83,9 @@ def test_the_applicability_table_names_real_fields():
     # (1/64, step 0.05: preload 0.5 for 0.082, pull-off -17 %, no word)
     (dict(spacing="1/64", k_th=0.02, shape="paraboloid", step=0.05), "step",
      r"step: only 1.64 loading steps to the automatic preload depth 0.0821"),
+    # under force control max_indent follows max_load: it named "max_indent 0.00381", a
+    # number the user never gave
+    (dict(spacing="1/64", k_th=0.02, shape="paraboloid", step=1e-3, control="force", max_load=1e-4), "step", r"step: only 3.81 loading steps to the depth of max_load 0.0001: 0.00381"),
     # 9.9999 steps read "only 10 loading steps ... below 10"
     (dict(OK, step=0.0500005 / 10), "step", r"step: only 9.9999 loading steps"),
     (dict(OK, tol=1e-2), "tol", r"tol: 0.01 is looser than 1e-06"),

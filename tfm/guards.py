@@ -329,7 +329,9 @@ def check(p, memory: bool = True) -> list[str]:
         depth = auto_max_indent(p, step_floor=False)
     steps = depth / p.step
     if steps < MIN_LOADING_STEPS * (1 - 1e-9):
-        where = "the automatic preload depth" if auto else "max_indent"
+        # under force control max_indent follows max_load: name what the user gave
+        where = ("the automatic preload depth" if auto else f"the depth of max_load {p.max_load:g}:"
+                 if p.control == "force" and p.max_load is not None else "max_indent")
         _guard(notes, allowed, "step", f"step: only {_below(steps, MIN_LOADING_STEPS)} loading steps to {where} {depth:.3g} "
                         f"(step {p.step:.3g}); "
                         f"below {MIN_LOADING_STEPS} the step shifts the pull-off by up to 16 %. Use step <= "
