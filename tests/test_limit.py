@@ -431,3 +431,73 @@ def test_the_report_s_discussion_follows_its_numbers():
     assert "Fig. 4 -2.603 ± 1.566 against -3" in quick and "not all close to 4α − 3" in quick
     assert "The fit does not give 0.75 here" in quick and "do not show the limit" in quick
     assert "confirmed" not in quick
+
+
+def _few_points(tmp_path):
+    """The kept points, cut as a partial campaign would leave them: the coarsest 4, 5 and
+    6 spacings per self term (a/Δ from 8 up to 20), the main preload only."""
+    import pandas as pd
+
+    from tfm.paper.limit import POINTS_FILE
+
+    p = pd.read_csv(REPO / "results" / "limit" / POINTS_FILE)
+    parts = []
+    for (_, s), d in p.groupby(["geometry", "self_term"]):
+        d = d.sort_values("ratio")
+        d = d[d["max_indent"] == d["max_indent"].min()]
+        parts.append(d.head({3.8: 4, 2.9732: 5, 3.5255: 6}[s]))
+    out = tmp_path / "few"
+    out.mkdir()
+    pd.concat(parts).to_csv(out / POINTS_FILE, index=False)
+    return out
+
+
+def test_a_plateau_needs_the_top_two_octaves_and_six_points():
+    """Five points over 1.3 octaves passed as a flat plateau, with an interval that
+    excluded the level of all 16 points; the label named a/Δ >= 5 below the data."""
+    from tfm.analysis import plateau
+
+    rng = np.random.default_rng(5)
+    y = 1.0 + rng.normal(0.0, 1e-3, X.size)             # flat: no drift at all
+    full = plateau(X, y)
+    assert full.enough and full.flat and full.n == 7
+    assert full.x_low == pytest.approx(64.0) and full.x_high == pytest.approx(256.0)
+    few = plateau(X[:5], y[:5])                           # a/Δ 8 .. 20: 1.3 octaves
+    assert not few.enough and not few.flat
+    six = plateau(X[:7], y[:7])                           # 8 .. 32: two octaves, 7 points
+    assert six.enough and six.flat
+
+
+def test_tfm_limit_gives_no_estimate_from_too_few_points(tmp_path, monkeypatch, capsys):
+    """A partial campaign: no plateau estimate from 5 points over 1.3 octaves, no
+    "stable: yes" for refits with 1 or 2 degrees of freedom, no advice to change the
+    code's coefficients from fits not shown stable, and strict JSON (NaN was written)."""
+    import json
+
+    from tfm.cli import main
+
+    out = _few_points(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    assert main(["limit", "--analyse-only", "--results-dir", str(tmp_path / "none"), "--out", str(out), "-q"]) in (0, 1)
+    text = (out / "REPORT.md").read_text()
+    assert "too few points to tell: 5 over 1.3 octaves, 6 over 2 needed" in text
+    assert "(plateau" not in text                         # no estimate from a plateau
+    assert "no limit estimate yet (the fit cannot pin p, and 5 points over 1.3 octaves are too few" in text
+    assert "not assessable (5 points)" in text and "| yes |" not in text
+    assert "update `tfm.units.LIMIT_COEFFICIENTS`" not in text
+    summary = json.loads((out / "summary.json").read_text(), parse_constant=lambda c: pytest.fail(c))
+    fits = [f for f in summary["fits"] if f["geometry"] == "paraboloid"]
+    assert fits and all(f.get("stable_without_any_one_point", None) is None for f in fits)
+
+
+def test_tfm_limit_max_ratio_below_every_run_is_refused(capsys):
+    """It printed "nothing to run, 0 of 60 runs already done" and exited 0."""
+    from tfm.campaign import CampaignError
+    from tfm.paper.limit import LIMIT_CAMPAIGNS, select_limit_runs
+    from tfm.paper.run import load_spec_for
+
+    specs = {g: load_spec_for(stem) for g, stem in LIMIT_CAMPAIGNS}
+    with pytest.raises(CampaignError, match=r"--max-ratio: no run has a_c/Δ <= 5; the smallest is 8"):
+        select_limit_runs(specs, 5.0, [])
+    with pytest.raises(CampaignError, match=r"no run that matches --where has a_c/Δ <= 5"):
+        select_limit_runs(specs, 5.0, ["self_term=3.8"])

@@ -502,7 +502,8 @@ def step_sampling_bound(curve: pd.DataFrame, window: int = 10) -> float:
 
 @dataclass(frozen=True)
 class Plateau(_Interval):
-    """Mean of y over the points with x >= x_min, with a Student-t interval."""
+    """Mean of y over the points with x >= x_min, with a Student-t interval; the points
+    averaged lie in [x_low, x_high]."""
 
     value_name = "mean"
     mean: float
@@ -512,19 +513,31 @@ class Plateau(_Interval):
     x_min: float
     drift: LineFit | None = None     # y against ln x over the same points
     confidence: float = CONFIDENCE
+    x_low: float = math.nan
+    x_high: float = math.nan
 
     def contains(self, value: float) -> bool:
         return self.ci_low <= value <= self.ci_high
 
     @property
+    def enough(self) -> bool:
+        """Whether the points can show a drift: at least PLATEAU_MIN_POINTS of them, over
+        the top octaves (less one step of three per octave). Five points over 1.3 octaves
+        passed as flat, with an interval that excluded the level of all 16."""
+        span = math.log2(self.x_high / self.x_low) if self.x_low > 0 else 0.0
+        return self.n >= PLATEAU_MIN_POINTS and span >= PLATEAU_OCTAVES - 1.0 / 3.0 - 1e-9
+
+    @property
     def flat(self) -> bool:
-        """Whether the points show no drift: the interval of dy/d ln x contains 0."""
-        return self.drift is not None and self.drift.ci_low <= 0.0 <= self.drift.ci_high
+        """Whether enough points show no drift: the interval of dy/d ln x contains 0."""
+        return (self.enough and self.drift is not None
+                and self.drift.ci_low <= 0.0 <= self.drift.ci_high)
 
 
 # the plateau is taken over the top two octaves of x: far enough from the coarse end,
-# with enough points (six at three per octave) for a t interval
+# with enough points (six at three per octave) for a t interval and a drift test
 PLATEAU_OCTAVES = 2.0
+PLATEAU_MIN_POINTS = 6
 
 
 def plateau(x, y, confidence: float = CONFIDENCE) -> Plateau:
@@ -544,7 +557,8 @@ def plateau(x, y, confidence: float = CONFIDENCE) -> Plateau:
     mean = float(sel.mean())
     half = _t_quantile(n - 1, confidence) * float(sel.std(ddof=1)) / math.sqrt(n) if n > 1 else math.inf
     drift = fit_line(np.log(x[keep]), sel, confidence=confidence) if n > 2 else None
-    return Plateau(mean, mean - half, mean + half, n, x_min, drift, confidence)
+    return Plateau(mean, mean - half, mean + half, n, x_min, drift, confidence,
+                   float(x[keep].min()), float(x[keep].max()))
 
 
 # ---- ensembles over seeds (rough surfaces, disordered thresholds) -------------------

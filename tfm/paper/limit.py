@@ -33,6 +33,12 @@ from ..analysis import fraction_text
 LIMIT_CAMPAIGNS = (("paraboloid", "limit_sphere"), ("flat punch", "limit_punch"))
 # fewest points for a fit with an interval (3 parameters + 2 degrees of freedom)
 MIN_FIT_POINTS = 5
+# The stability check refits without each point: y_inf, C and p from n - 1 points leave
+# n - 4 degrees of freedom. With 1 or 2 the t quantile is 12.7 or 4.3 and every refit's
+# interval holds the full fit's limit ("stable: yes" for 5 points of a/Δ 8-20, with a
+# refit of [-18, 10]); from 3 (quantile 3.2) the check can fail.
+LIMIT_PARAMETERS = 3
+LOO_MIN_DOF = 3
 REFERENCE = {"paraboloid": theory.JKR_COEFFICIENT, "flat punch": 1.0}
 Y_LABEL = {"paraboloid": "F_max/(K_th² R)", "flat punch": "F_max/F_Kendall"}
 
@@ -189,8 +195,17 @@ class LimitResult:
             return f.y_inf, f.y_inf_low, f.y_inf_high, "fit"
         if self.level is not None and self.level.flat:
             lv = self.level
-            return lv.mean, lv.ci_low, lv.ci_high, f"plateau, a/Δ ≥ {lv.x_min:.0f}"
+            return lv.mean, lv.ci_low, lv.ci_high, f"plateau, a/Δ {lv.x_low:.0f}–{lv.x_high:.0f}"
         return math.nan, math.nan, math.nan, "—"
+
+    @property
+    def why_no_estimate(self) -> str:
+        """Why ``estimate`` has none: no trend to fit, and no plateau to take instead."""
+        lv = self.level
+        if lv is not None and not lv.enough:
+            return (f"the fit cannot pin p, and {lv.n} points over {math.log2(lv.x_high / lv.x_low):.1f} "
+                    f"octaves are too few to show a plateau")
+        return "the fit cannot pin p and the top octaves still drift"
 
     @property
     def k_ratio(self) -> tuple[float, float, float]:
@@ -217,7 +232,10 @@ class LimitResult:
         full = self.fit.y_inf
         misses = [(x, f) for x, f in loo if not (f.y_inf_low <= full <= f.y_inf_high and f.p > 0)]
         worst_x, worst = max(loo, key=lambda xf: abs(xf[1].y_inf - full))
-        self._stability = {"stable": not misses, "y_inf_min": min(f.y_inf for _, f in loo),
+        # None: not assessable, the refits' intervals too wide to exclude anything
+        assessable = len(self.points) - 1 - LIMIT_PARAMETERS >= LOO_MIN_DOF
+        self._stability = {"stable": (not misses) if assessable else None,
+                           "y_inf_min": min(f.y_inf for _, f in loo),
                            "y_inf_max": max(f.y_inf for _, f in loo), "p_min": min(f.p for _, f in loo),
                            "p_max": max(f.p for _, f in loo), "misses": misses, "worst": (worst_x, worst)}
         return self._stability
@@ -273,7 +291,7 @@ def plot_limit(results: list[LimitResult], path: Path) -> None:
                 ax.fill_between(xs, lo, hi, color=color, alpha=0.18, lw=0)
                 ax.plot(xs, r.fit.predict(np.where(np.isinf(ratio), 1e300, ratio)), "-", color=color, lw=1)
             elif r.level is not None and r.level.flat:        # no trend: the plateau of the top octaves
-                xs = np.array([0.0, 1.0 / r.level.x_min])
+                xs = np.array([0.0, 1.0 / r.level.x_low])
                 ax.fill_between(xs, [lo_y] * 2, [hi_y] * 2, color=color, alpha=0.18, lw=0)
                 ax.plot(xs, [best] * 2, "--", color=color, lw=1)
             if math.isfinite(best):
@@ -309,16 +327,23 @@ def paper_ratio_range(results_dir=None) -> tuple[float, float, float]:
 def units_note(para) -> str:
     """Whether tfm.units' "limit" coefficients are these fits (to the 3 decimals they keep)."""
     from ..units import LIMIT_COEFFICIENTS
-    fitted = {r.self_term: round(r.estimate[0], 3) for r in para
+    fitted = {r.self_term: (round(r.estimate[0], 3), r) for r in para
               if r.estimate[3] == "fit" and math.isfinite(r.estimate[0])}
-    stale = [f"{s:g}: {LIMIT_COEFFICIENTS.get(s)} vs {c:.3f}" for s, c in fitted.items()
-             if LIMIT_COEFFICIENTS.get(s) != c]
+    differ = {s: (c, r) for s, (c, r) in fitted.items() if LIMIT_COEFFICIENTS.get(s) != c}
+    # a constant in the code follows a fit only if that fit survives leaving out any point
+    stale = [f"{s:g}: {LIMIT_COEFFICIENTS.get(s)} vs {c:.3f}" for s, (c, r) in differ.items()
+             if r.stability()["stable"]]
+    unsure = [f"{s:g}: {c:.3f}" for s, (c, r) in differ.items() if not r.stability()["stable"]]
     used = ", ".join(f"{c:.3f} (self term {s:g})" for s, c in LIMIT_COEFFICIENTS.items())
     if stale:
         return ("`k_th_coefficient = \"limit\"` still holds older values; update "
                 f"`tfm.units.LIMIT_COEFFICIENTS` ({'; '.join(stale)}).")
-    return (f"`k_th_coefficient = \"limit\"` derives K_th from γ with these fitted c∞: {used} "
+    text = (f"`k_th_coefficient = \"limit\"` derives K_th from γ with these fitted c∞: {used} "
             "(`tfm.units.LIMIT_COEFFICIENTS`; a record stores the number).")
+    if unsure:
+        text += (f" These data fit other values ({'; '.join(unsure)}), but those fits are not shown "
+                 "stable without any one point (Stability), so they are no reason to change them.")
+    return text
 
 
 def verdict_76(res: LimitResult) -> str:
@@ -326,7 +351,7 @@ def verdict_76(res: LimitResult) -> str:
     best, low, high, source = res.estimate
     c = theory.PAPER_COEFFICIENT
     if not math.isfinite(best):
-        return ("no verdict yet: at the a_c/Δ reached the fit cannot pin p and the top octaves still drift, "
+        return (f"no verdict yet: at the a_c/Δ reached {res.why_no_estimate}, "
                 "so there is no limit estimate to set beside it.")
     lo, hi, spacing = paper_ratio_range()
     where = f"the paper's fit at Δ = {fraction_text(spacing)} spans a_c/Δ = {lo:.0f}–{hi:.0f} in our units"
@@ -346,6 +371,15 @@ def _interval(lo, best, hi, digits=3) -> str:
     return f"{best:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
 
 
+def _plateau_doubt(level: analysis.Plateau) -> str:
+    if level.flat:
+        return ""
+    if not level.enough:
+        return (f", too few points to tell: {level.n} over {math.log2(level.x_high / level.x_low):.1f} "
+                f"octaves, {analysis.PLATEAU_MIN_POINTS} over {analysis.PLATEAU_OCTAVES:g} needed")
+    return ", still drifting"
+
+
 def summary_table(results: list[LimitResult]) -> pd.DataFrame:
     rows = []
     for r in results:
@@ -357,7 +391,7 @@ def summary_table(results: list[LimitResult]) -> pd.DataFrame:
             "fit y∞ (95 %)": f.text(3) if f else "—",
             "fit p (95 %)": f.p_text(2) if f else "—",
             "plateau (95 %)": (f"{r.level.mean:.3f} [{r.level.ci_low:.3f}, {r.level.ci_high:.3f}] "
-                               f"(a/Δ ≥ {r.level.x_min:.0f}" + ("" if r.level.flat else ", still drifting")
+                               f"(a/Δ {r.level.x_low:.0f}–{r.level.x_high:.0f}" + _plateau_doubt(r.level)
                                + ")") if r.level else "—",
             "K_eff/K_th (95 %)": f"{_interval(klo, k, khi)} ({r.estimate[3]})" if math.isfinite(k) else "—",
             "residual σ": f"{f.sigma:.3g}" if f else "—",
@@ -403,8 +437,9 @@ def stability_section(results: list[LimitResult]) -> list[str]:
                      "p without one point": f"{st['p_min']:.2f}–{st['p_max']:.2f}",
                      "largest move": f"without a/Δ = {wx:.0f}: {wf.y_inf:.3f} [{wf.y_inf_low:.3f}, {wf.y_inf_high:.3f}], "
                                      f"p = {wf.p:.2f}",
-                     "stable": "yes" if st["stable"] else "no"})
-        if not st["stable"]:
+                     "stable": {True: "yes", False: "no"}.get(st["stable"],
+                                                                f"not assessable ({len(r.points)} points)")})
+        if st["stable"] is False:
             left = ", ".join(f"{x:.0f}" for x, _ in st["misses"])
             notes.append(f"- self term {r.self_term:g}: without the point(s) at a/Δ = {left} the interval "
                          f"excludes the full fit's {r.fit.y_inf:.3f}. The limit then depends on whether those "
@@ -416,7 +451,9 @@ def stability_section(results: list[LimitResult]) -> list[str]:
 
     return (["## Stability: the fit without any one point", "",
              "Each paraboloid fit that pins p, refitted once without each of its points. “Stable” means that "
-             "every such fit keeps the full fit's y∞ inside its own 95 % interval, with p > 0.", "",
+             "every such fit keeps the full fit's y∞ inside its own 95 % interval, with p > 0. It needs "
+             f"at least {LIMIT_PARAMETERS + LOO_MIN_DOF + 1} points: with fewer, the refits' intervals are "
+             "too wide to exclude anything.", "",
              md_table(pd.DataFrame(rows)), ""] + notes + ([""] if notes else []))
 
 
@@ -491,8 +528,8 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
     for r in para:
         best, low, high, source = r.estimate
         if not math.isfinite(best):
-            lines.append(f"- paraboloid, self term {r.self_term:g}: no limit estimate yet (the fit cannot pin p and "
-                         f"the top octaves still drift); points up to a_c/Δ = {r.largest_ratio:.0f}.")
+            lines.append(f"- paraboloid, self term {r.self_term:g}: no limit estimate yet ({r.why_no_estimate}); "
+                         f"points up to a_c/Δ = {r.largest_ratio:.0f}.")
             continue
         p_txt = f"p = {r.fit.p_text(2)}" if r.trend_found else "no trend the fit can pin (p interval open)"
         lines.append(f"- paraboloid, self term {r.self_term:g}: c∞ = {best:.3f} [{low:.3f}, {high:.3f}] ({source}) "
@@ -504,8 +541,8 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
         if r.geometry == "flat punch" and r.fit is not None:
             best, low, high, source = r.estimate
             if not math.isfinite(best):
-                lines.append(f"- flat punch, self term {r.self_term:g}: no limit estimate yet (no trend the fit can "
-                             f"pin, yet the top octaves still drift); points up to a/Δ = {r.largest_ratio:.0f}.")
+                lines.append(f"- flat punch, self term {r.self_term:g}: no limit estimate yet ({r.why_no_estimate}); "
+                             f"points up to a/Δ = {r.largest_ratio:.0f}.")
                 continue
             lines.append(f"- flat punch, self term {r.self_term:g}: F_max/F_Kendall → {best:.3f} [{low:.3f}, {high:.3f}] "
                          f"({source}); " + (f"p = {r.fit.p_text(2)}" if r.trend_found else
@@ -541,7 +578,8 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "REPORT.md").write_text("\n".join(lines) + "\n")
     summary["pending"] = pending
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
+    # strict JSON (JavaScript's JSON.parse refuses NaN): a value that does not exist is null
+    (out_dir / "summary.json").write_text(json.dumps(_strict(summary), indent=1, allow_nan=False) + "\n")
     return summary
 
 
@@ -555,9 +593,26 @@ def summary_line(out_dir: Path) -> str | None:
                 and abs(f["self_term"] - theory.PAPER_SELF_TERM) < 1e-9), None)
     if fit is None:
         return None
+    if fit["y_inf"] is None:
+        return (f"[Beyond the paper](../limit/REPORT.md) has no limit estimate yet at self term "
+                f"{theory.PAPER_SELF_TERM:g} ({fit['points']} spacings up to a_c/Δ = {fit['largest_ratio']:.0f}).")
     return (f"Extrapolated to Δ → 0 ([Beyond the paper](../limit/REPORT.md): {fit['points']} spacings up to "
             f"a_c/Δ = {fit['largest_ratio']:.0f}), the coefficient at self term {theory.PAPER_SELF_TERM:g} tends to "
             f"{fit['y_inf']:.3f} [{fit['y_inf_low']:.3f}, {fit['y_inf_high']:.3f}] (95 %, {fit['source']}).")
+
+
+def _strict(value):
+    """``value`` for strict JSON: NaN and infinities as None, NumPy numbers as Python's."""
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    if isinstance(value, (bool, str, type(None))):
+        return value
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    value = float(value)
+    return value if math.isfinite(value) else None
 
 
 def select_limit_runs(specs: dict, max_ratio: float | None, where) -> dict | None:
@@ -581,6 +636,11 @@ def select_limit_runs(specs: dict, max_ratio: float | None, where) -> dict | Non
                           if max_ratio is None or spec_ratio(r.params) <= max_ratio * (1 + 1e-9)}
     if len(errors) == len(specs):
         raise errors[0]
+    if max_ratio is not None and not any(only.values()):
+        # it said "nothing to run, 0 of 60 runs already done" and exited 0
+        smallest = min(spec_ratio(r.params) for spec in specs.values() for r in spec.runs)
+        raise CampaignError(f"--max-ratio: no run{' that matches --where' if where else ''} has "
+                            f"a_c/Δ <= {max_ratio:g}; the smallest is {smallest:.3g}")
     return only
 
 
