@@ -898,7 +898,12 @@ def test_where_computes_only_the_selected_runs_and_resumes_the_rest(tmp_path, ca
     path = _write(tmp_path, text)
     res = tmp_path / "res"
     args = ["campaign", "run", str(path), "--results-dir", str(res), "-q"]
-    assert tfm_main(args + ["--where", "alpha=0.75", "--where", "spacing=1/20"]) == 0
+    capsys.readouterr()
+    assert tfm_main(args[:-1] + ["--where", "alpha=0.75", "--where", "spacing=1/20"]) == 0
+    # the runs not selected are neither done nor forgotten
+    assert "1 runs done, 0 failed, 0 already done, 3 not selected" in capsys.readouterr().err
+    assert tfm_main(args[:-1] + ["--where", "alpha=0.75", "--where", "spacing=1/20"]) == 0
+    assert "nothing to run, 1 of 4 runs already done, 3 not selected" in capsys.readouterr().err
     spec = load_spec(path)
     store = CampaignStore.for_spec(spec, res)
     done = store.status(spec).done

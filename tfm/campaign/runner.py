@@ -166,8 +166,11 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
         extra = store.extra_note(status)
         if extra and not quiet:
             print(f"campaign {spec.name}: {extra}", file=sys.stderr)
+        left_out = 0
         if only is not None:                 # run ids, or the Run records select_runs returns
-            redo &= {getattr(r, "run_id", r) for r in only}
+            chosen = {getattr(r, "run_id", r) for r in only}
+            left_out = len(redo - chosen)
+            redo &= chosen
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo and client is None:
             _check_memory(spec, todo, min(jobs, len(todo)))
@@ -195,13 +198,15 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
                     outcomes = _run_serial(todo, ckpt, stop)
                 try:
                     _consume(spec, store, todo, outcomes, skipped=len(set(status.done) - redo), quiet=quiet,
-                             handled=handled)
+                             handled=handled, left_out=left_out)
                 except KeyboardInterrupt:
                     if stop.signum is None:
                         raise
             elif not quiet:
+                # runs not done and not selected: they are not "done" (tfm limit's kept points)
                 print(f"campaign {spec.name}: nothing to run, {len(status.done)} of {len(spec.runs)} runs "
-                      f"already done -> {store.root}", file=sys.stderr)
+                      f"already done" + (f", {left_out} not selected" if left_out else "")
+                      + f" -> {store.root}", file=sys.stderr)
             try:
                 store.write_tables(spec)
             except OSError as exc:
@@ -247,9 +252,10 @@ def _check_memory(spec, todo: list[Run], workers: int) -> None:
 
 
 def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped: int, quiet: bool,
-             handled: set[str]) -> None:
+             handled: set[str], left_out: int = 0) -> None:
     """Store each outcome as it comes; ``handled`` collects the ids stored, also when the
-    outcomes stop early (an interrupted campaign)."""
+    outcomes stop early (an interrupted campaign). ``skipped`` runs were done before,
+    ``left_out`` not done and not selected (for the closing line)."""
     bar = _progress(spec.name, len(todo), quiet)
     failed = 0
     try:
@@ -272,7 +278,8 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
         bar.close()
     if not quiet and len(handled) == len(todo):
         print(f"campaign {spec.name}: {len(todo) - failed} runs done, {failed} failed, "
-              f"{skipped} already done -> {store.root}", file=sys.stderr)
+              f"{skipped} already done" + (f", {left_out} not selected" if left_out else "")
+              + f" -> {store.root}", file=sys.stderr)
 
 
 def _again(spec, store) -> str:
