@@ -25,7 +25,7 @@ OK = dict(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05, step=2
 
 # ---- every parameter is used or refused --------------------------------------------
 @pytest.mark.parametrize("kw, match", [
-    (dict(alpha=0.5, f_th=1e-5), "alpha: 0.5 has no effect here; it applies only when k_th is given"),
+    (dict(alpha=0.5, f_th=1e-5), "alpha: 0.5 has no effect here; it applies only when k_th or work_of_adhesion is given"),
     (dict(theta=0.3), "theta: 0.3 has no effect here; it applies only when operator='tree'"),
     (dict(jitter=0.1), "jitter: .* applies only when layout='jittered'"),
     (dict(seed=3), "seed: 3 has no effect here; it applies only when layout='jittered'"),

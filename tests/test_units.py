@@ -186,6 +186,18 @@ def test_bad_unit_input_fails_early(changes, match):
         Params.from_dict({**SI, "spacing": R / 32, "step": R * 1e-3, **changes})
 
 
+def test_alpha_given_in_an_si_run_is_not_called_ineffective():
+    """F_th = K_th A^alpha with K_th from work_of_adhesion: alpha = 0.75 given explicitly
+    was warned "has no effect; it applies only when k_th is given"."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        Params.from_dict({**SI, "spacing": R / 32, "step": R * 1e-3, "alpha": 0.75})
+    with pytest.raises(ParameterError, match="alpha: must be 0.75 with work_of_adhesion"):
+        Params.from_dict({**SI, "spacing": R / 32, "step": R * 1e-3, "alpha": 0.5})
+
+
 def test_si_fields_refused_in_paper_units():
     with pytest.raises(ParameterError, match="youngs_modulus: 1000000.0 has no effect .* units='si'"):
         Params(youngs_modulus=1e6)

@@ -397,8 +397,10 @@ class Applies:
 # default value given explicitly there is a ParameterWarning (harmless, but probably not
 # what was meant). New conditional parameters add one line here.
 APPLIES: dict[str, Applies] = {
-    "alpha": Applies("k_th is given (F_th = k_th A^alpha); with f_th, alpha = 0 (no area "
-                     "dependence) is accepted too", lambda p: p.k_th is not None,
+    # with work_of_adhesion (SI), F_th = K_th A^alpha too, its K_th derived for alpha = 0.75
+    "alpha": Applies("k_th or work_of_adhesion is given (F_th = K_th A^alpha); with f_th, alpha = 0 "
+                     "(no area dependence) is accepted too",
+                     lambda p: p.k_th is not None or (p.units == "si" and p.work_of_adhesion is not None),
                      also=lambda p: p.alpha == 0.0),
     "self_term": Applies("kernel is 'boussinesq' or 'neighbors' (the Winkler kernel uses c_w)",
                          lambda p: p.kernel != "local"),
