@@ -171,6 +171,12 @@ ROUGH = dict(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05, ste
     # rolloff sets the PSD below long_cutoff only: without it, three values drew one surface
     (dict(ROUGH, extent=0.5, rolloff=0.3), "rolloff: 0.3 has no effect here; it applies only when the surface "
                                           "is rough and long_cutoff is given"),
+    # long_cutoff at the grid side leaves no mode below q_L: rolloff 0 and 1 drew one surface
+    (dict(ROUGH, extent=0.75, long_cutoff="49/32", rolloff=0.0),
+     r"rolloff: 0.0 has no effect here: long_cutoff 1.53125 is the grid side"),
+    # a grid narrower than the default short cutoff: a TypeError formatting long_cutoff None
+    (dict(ROUGH, shape="flat_punch", radius=0.05, k_th=None, f_th=0.0, extent="1/32", max_indent=0.01, step=1e-4),
+     r"short_cutoff: the grid \(side 0\.09375\) is narrower than the default short cutoff, 4 spacings = 0\.125"),
     # a seed beyond int64 computed, and then no campaign table could ever be written
     (dict(ROUGH, roughness_seed=2 ** 64 + 1), r"roughness_seed: must be in \[0, 9223372036854775807\]"),
     # force control: 1e10 load steps started; the depth's errors named max_indent, not max_load

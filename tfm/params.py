@@ -826,10 +826,21 @@ def _validate_surface_relations(p: Params) -> None:
     if _rough(p):
         from .surfaces import default_short_cutoff, grid_side, has_modes
         short = p.short_cutoff if p.short_cutoff is not None else default_short_cutoff(p.spacing)
+        if not has_modes(grid_side(p), p.spacing, short, None):
+            # only the default can get here (a given short_cutoff > side is refused above)
+            raise ParameterError(f"short_cutoff: the grid (side {side:g}) is narrower than the default short "
+                                 f"cutoff, 4 spacings = {short:g}, so the surface would have no roughness; "
+                                 "give a smaller short_cutoff or a larger grid (extent)")
         if not has_modes(grid_side(p), p.spacing, short, p.long_cutoff, p.rolloff):
             raise ParameterError(f"short_cutoff / long_cutoff: no wavevector of the grid (side {side:g}) lies "
                                  f"between the cutoffs {short:g} and {p.long_cutoff:g} with rolloff = 0, so the "
                                  "surface would have no roughness; widen the band or give rolloff > 0")
+        if (p.long_cutoff is not None and p.rolloff != _DEFAULTS["rolloff"]
+                and p.long_cutoff >= side * (1 - 1e-12)):
+            # the grid's longest wavelength is its side: no mode lies below q_L
+            raise ParameterError(f"rolloff: {p.rolloff!r} has no effect here: long_cutoff {p.long_cutoff:g} is the "
+                                 f"grid side, so no wavevector of the grid lies below q_L = 2 pi / long_cutoff; "
+                                 "give a shorter long_cutoff or leave rolloff at 1")
 
 
 def _check_map_covers(p: Params) -> None:
