@@ -247,8 +247,11 @@ def test_contact_at_a_cropped_side_of_a_height_map_is_flagged(tmp_path, capsys):
     xs = (np.arange(65) - 32) / 64
     bowl = -(xs[:, None] ** 2 + xs[None, :] ** 2) / 2.0          # the paraboloid R = 1, +-0.5
     kw = dict(shape="height_map", spacing=1 / 32, f_th=0.0, max_indent=0.05, step=1e-3, map_pixel_size=1 / 64)
-    with pytest.warns(UserWarning, match="grid edge"):
+    # the advice fits a map (extent_margin does not apply to one: it said "raise extent_margin")
+    with pytest.warns(UserWarning, match="grid edge.*enlarge extent, if the map covers it, or use a larger map"):
         cut = simulate(height_map=_map(tmp_path, "bowl.npy", array=bowl), extent=0.15, **kw)
+    with pytest.warns(UserWarning, match="grid edge.*use a larger map or a shallower max_indent"):
+        simulate(height_map=_map(tmp_path, "wide.npy", array=bowl[16:49, :]), **dict(kw, max_indent=0.1))
     assert cut.summary["contact_reached_edge"]
     whole = simulate(height_map=_map(tmp_path, "small.npy", array=bowl[16:49, 16:49]), **kw)
     assert whole.summary["max_contact_radius"] > 0.2 and not whole.summary["contact_reached_edge"]

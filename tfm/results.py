@@ -291,7 +291,13 @@ def summarize(curve, out, p: Params, n_springs: int, grid_side: int | None) -> d
     pulled = n > 0 and tension[k] > 0.0
     warnings = []
     if out.edge_steps:
-        grow = "enlarge extent" if p.extent is not None else "raise extent_margin or give a larger extent"
+        if p.shape == "height_map":
+            # extent_margin does not apply, and the map bounds the extent
+            grow = ("enlarge extent, if the map covers it, or use a larger map or a shallower max_indent"
+                    if p.extent is not None else "use a larger map or a shallower max_indent (the grid is "
+                    "the largest square that the map covers)")
+        else:
+            grow = "enlarge extent" if p.extent is not None else "raise extent_margin or give a larger extent"
         warnings.append(f"contact reached the grid edge at {out.edge_steps} steps "
                         f"(half-width {p.half_width:g}); {grow}")
     if out.solver_failures:
