@@ -321,6 +321,14 @@ def test_a_text_file_named_npy_is_not_called_pickled_data(tmp_path):
 def test_missing_map_and_map_without_shape(tmp_path):
     with pytest.raises(ParameterError, match="height_map: no such file"):
         Params(shape="height_map", height_map=str(tmp_path / "nope.npy"), f_th=0, max_indent=1e-3, step=1e-4)
+    # an array's repr came back as "no such file '[[ 1.257e-04 ...'"; '' and a folder as
+    # "file . not found" and "file /tmp not found"
+    for value, match in ((np.zeros((3, 3)), "height_map: expected the path of a map file .*got a ndarray; "
+                                            "save an array with numpy.save"),
+                         ("", "height_map: expected the path of a map file .*got ''"),
+                         (str(tmp_path), "is a folder, not a map file")):
+        with pytest.raises(ParameterError, match=match):
+            Params(shape="height_map", height_map=value, f_th=0, max_indent=1e-3, step=1e-4)
     with pytest.raises(ParameterError, match="height_map: shape='height_map' needs"):
         Params(shape="height_map", f_th=0, max_indent=1e-3, step=1e-4)
     with pytest.raises(ParameterError, match="height_map: applies only to shape='height_map'"):
@@ -464,6 +472,37 @@ def test_surface_topography_file_in_si_units(tmp_path):
     # springs sit that close to the pixels and the heights match to about that
     expect = arr[0:39, 0:39].ravel() * 1e-6
     np.testing.assert_allclose(x0, expect - expect.max(), rtol=0, atol=1e-12)
+
+
+def test_text_maps_are_read_as_heights_and_unknown_formats_named_briefly(tmp_path):
+    """A numpy.savetxt matrix failed with "physical_sizes could not be extracted from
+    file, you must provide it" though map_pixel_size was given; it is read as a .npy is.
+    A .csv dumped SurfaceTopography's 48 lines of readers tried."""
+    pytest.importorskip("SurfaceTopography")
+    heights_ = np.random.default_rng(4).random((33, 33)) * 1e-3
+    # SurfaceTopography reads a text file's rows along y, as an image: heights[x, y] = row y
+    np.save(tmp_path / "m.npy", heights_.T)
+    np.savetxt(tmp_path / "m.txt", heights_)
+    kw = dict(shape="height_map", map_pixel_size=1 / 32, spacing=1 / 16, f_th=0.0, max_indent=2e-3, step=1e-4)
+    p_txt = Params(height_map=str(tmp_path / "m.txt"), **kw)
+    p_npy = Params(height_map=str(tmp_path / "m.npy"), **kw)
+    np.testing.assert_array_equal(heights(p_txt, make_layout(p_txt)), heights(p_npy, make_layout(p_npy)))
+    np.savetxt(tmp_path / "m.csv", heights_, delimiter=",")
+    with pytest.raises(ParameterError) as info:
+        Params(height_map=str(tmp_path / "m.csv"), **kw)
+    assert "cannot tell the format" in str(info.value) and "numpy.savetxt" in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_a_topography_without_a_unit_is_read_in_metres_with_a_warning(tmp_path):
+    """Sizes without a unit were taken in metres in silence."""
+    from tfm.surfaces import MapUnitWarning
+
+    st = pytest.importorskip("SurfaceTopography")
+    path = str(tmp_path / "nounit.nc")
+    st.Topography(np.random.default_rng(1).random((33, 33)) * 1e-3, (1.0, 1.0)).to_netcdf(path)
+    with pytest.warns(MapUnitWarning, match="gives its size .* but no length unit; .* taken in metres"):
+        Params(shape="height_map", height_map=path, spacing=1 / 16, f_th=0.0, max_indent=2e-3, step=1e-4)
 
 
 def _topography(tmp_path, name, heights, size, unit):

@@ -770,6 +770,11 @@ def _validate_surface(p: Params) -> None:
     if not is_map and p.height_map is not None:
         raise ParameterError(f"height_map: applies only to shape='height_map'; got shape={p.shape!r}")
     if is_map:
+        if not isinstance(p.height_map, (str, os.PathLike)) or not str(p.height_map).strip():
+            # an array's repr came back as "no such file '[[ 1.257e-04 ...'"
+            got = f"a {type(p.height_map).__name__}" if not isinstance(p.height_map, str) else "''"
+            raise ParameterError(f"height_map: expected the path of a map file (.npy, or a format "
+                                 f"SurfaceTopography reads), got {got}; save an array with numpy.save")
         if p.map_pixel_size is not None:
             _positive("map_pixel_size", p.map_pixel_size)
         if p.max_indent == "auto":
@@ -787,10 +792,10 @@ def _validate_surface(p: Params) -> None:
             own = hm.pixel_size * to_m
             if not math.isclose(p.map_pixel_size, own, rel_tol=1e-6):
                 raise ParameterError(
-                    f"map_pixel_size: {p.height_map} gives its own pixel size, {hm.pixel_size:g} {hm.unit or ''} "
+                    f"map_pixel_size: {p.height_map} gives its own pixel size, {hm.pixel_size:g}{' ' + hm.unit if hm.unit else ''} "
                     f"= {own:g} m, and its heights in {hm.unit or 'm'}, both taken in metres"
                     f"{' (L* = 1 m in paper units)' if p.units == 'paper' else ''}; map_pixel_size applies "
-                    f"to maps without one (.npy), got {p.map_pixel_size!r}. To rescale the map, save its "
+                    f"to maps without one (.npy, text), got {p.map_pixel_size!r}. To rescale the map, save its "
                     "heights as .npy and give map_pixel_size")
             # the file's own value given again: the record (and the run id) is the one
             # made without it, since the physics is the same

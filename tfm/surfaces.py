@@ -47,6 +47,7 @@ import hashlib
 import math
 import os
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +60,10 @@ NYQUIST_SPACINGS = 2.0
 
 class MapError(ValueError):
     """A height map cannot be read or is unusable (raised as ParameterError by Params)."""
+
+
+class MapUnitWarning(UserWarning):
+    """A map file gives its size but no length unit: it is read in metres."""
 
 
 # ---- self-affine synthesis -------------------------------------------------
@@ -288,6 +293,8 @@ def load_height_map(path: str) -> HeightMap:
         stat = file.stat()
     except OSError:
         raise MapError(f"height_map: no such file {str(path)!r}") from None
+    if file.is_dir():
+        raise MapError(f"height_map: {str(path)!r} is a folder, not a map file")
     key = (str(file.resolve()), stat.st_mtime_ns, stat.st_size)
     if key in _MAP_CACHE:
         return _MAP_CACHE[key]
@@ -324,13 +331,29 @@ def load_height_map(path: str) -> HeightMap:
 
 def _read_with_surface_topography(file: Path):
     try:
-        from SurfaceTopography import read_topography
+        from SurfaceTopography import open_topography
     except ImportError:
         raise MapError(f"height_map: {file.suffix!r} files need SurfaceTopography "
                        "(pip install 'tfm[topography]'); or save the heights as .npy") from None
     try:
-        topo = read_topography(str(file))
+        with open_topography(str(file)) as reader:
+            channel = reader.default_channel
+            if channel.physical_sizes is None:
+                # a plain matrix (text): heights only, read as a .npy (map_pixel_size, or the
+                # spacing) instead of "physical_sizes could not be extracted, you must provide it"
+                topo = reader.topography(physical_sizes=channel.nb_grid_pts)
+                if topo.dim != 2:
+                    raise MapError(f"height_map: {str(file)!r} is a line scan, not a 2-D map")
+                return np.array(topo.heights(), dtype=np.float64), None, None
+            topo = reader.topography()
+    except MapError:
+        raise
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad map
+        if type(exc).__name__ == "CannotDetectFileFormat":
+            # its message lists every reader it tried (48 lines for a .csv)
+            raise MapError(f"height_map: SurfaceTopography cannot tell the format of {str(file)!r} (none of its "
+                           "readers accepts it); save a matrix of heights with numpy.save (.npy) or "
+                           "numpy.savetxt (space-separated text)") from None
         raise MapError(f"height_map: SurfaceTopography cannot read {str(file)!r}: {exc}") from None
     if topo.dim != 2:
         raise MapError(f"height_map: {str(file)!r} is a line scan, not a 2-D map")
@@ -342,7 +365,13 @@ def _read_with_surface_topography(file: Path):
     if np.ma.isMaskedArray(heights):
         # missing data: the mask's fill value (1e20) would be read as a height
         heights = np.ma.filled(heights.astype(np.float64), np.nan)
-    return np.asarray(heights), sx / nx, getattr(topo, "unit", None)
+    unit = getattr(topo, "unit", None)
+    if unit is None:
+        # sizes without a unit: the map is read in metres (L* in paper units), as before,
+        # but not in silence
+        warnings.warn(f"height_map: {str(file)!r} gives its size ({sx:g} x {sy:g}) but no length unit; its sizes "
+                      "and heights are taken in metres (in paper units, in L*)", MapUnitWarning, stacklevel=2)
+    return np.asarray(heights), sx / nx, unit
 
 
 def map_pixel(p, hm: HeightMap) -> float:
