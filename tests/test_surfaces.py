@@ -505,6 +505,26 @@ def test_a_topography_without_a_unit_is_read_in_metres_with_a_warning(tmp_path):
         Params(shape="height_map", height_map=path, spacing=1 / 16, f_th=0.0, max_indent=2e-3, step=1e-4)
 
 
+def test_a_steep_surface_is_flagged_before_the_run(tmp_path):
+    """A map whose heights and pixel are in different units (rms slope 128 here) ran with
+    no word about slopes; the half-space model assumes gentle ones."""
+    from tfm import guards, simulate
+
+    steep = _map(tmp_path, "steep.npy", array=np.random.default_rng(0).standard_normal((65, 65)))
+    kw = dict(shape="height_map", map_pixel_size=1 / 64, spacing=1 / 32, f_th=0.0, max_indent=0.01, step=5e-4)
+    slope = guards.surface_rms_slope(Params(height_map=steep, **kw))
+    assert slope > 100
+    with pytest.warns(UserWarning, match=r"height_map: the map's rms slope is 1\d\d, steeper than 1 .* same length unit"):
+        res = simulate(height_map=steep, **kw)
+    assert "rms slope" in res.summary["warnings"]
+    gentle = _map(tmp_path, "gentle.npy", array=1e-3 * np.random.default_rng(0).standard_normal((65, 65)))
+    assert guards.surface_rms_slope(Params(height_map=gentle, **kw)) == pytest.approx(slope * 1e-3)
+    assert not any("rms slope" in n for n in guards.check(Params(height_map=gentle, **kw)))
+    assert any("rms_slope: the requested rms slope is 2" in n
+               for n in guards.check(Params.from_dict(dict(shape="paraboloid", k_th=0.02, spacing=1 / 32, max_indent=0.05,
+                                                          step=1e-3, rms_slope=2.0))))
+
+
 def _topography(tmp_path, name, heights, size, unit):
     st = pytest.importorskip("SurfaceTopography")
     path = str(tmp_path / name)

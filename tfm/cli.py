@@ -363,8 +363,9 @@ def build_parser() -> argparse.ArgumentParser:
                                      "memory, or an output not written after the run; 2: bad "
                                      "input or output; 3: a suspect run (grid edge reached, solver "
                                      "not converged, rounds or unloading steps capped, fewer springs "
-                                     "in contact than a disc of radius 2 spacings, auto preload "
-                                     "capped, allowed past a guard, snapshots stopped early); 130: "
+                                     "in contact than a disc of radius 2 spacings, a surface steeper "
+                                     "than rms slope 1, auto preload capped, allowed past a guard, "
+                                     "snapshots stopped early); 130: "
                                      "interrupted.")
     _add_param_flags(run)
     run.add_argument("-o", "--output", default=None, metavar="FILE.parquet",

@@ -40,6 +40,13 @@ MIN_SPRINGS_ACROSS_RADIUS = 2.0
 MIN_LOADING_STEPS = 10
 MAX_TOL = 1e-6
 
+# The half-space model treats the surface as flat on the scale of its heights' changes:
+# beyond an rms slope of 1 (a mean inclination of 45 degrees) it does not describe the body,
+# and a map that steep is more often heights and pixel in different units (heights written
+# in micrometres over a pixel in metres are a million times too steep). Stated as a flag, not
+# refused: nothing was measured to draw a line below it.
+MAX_RMS_SLOPE = 1.0
+
 # guard name -> the parameter it names and what it protects (``allow`` takes the names)
 GUARDS = {
     "coarse": "spacing: fewer than 2 springs across the contact radius at maximum load",
@@ -74,6 +81,21 @@ def _guard(notes: list, allowed: set, guard: str, message: str) -> None:
     if guard not in allowed:
         _refuse(guard, message)
     notes.append(f"allowed past the {guard!r} guard: {message}")
+
+
+def surface_rms_slope(p) -> float:
+    """The rms slope of the body's roughness: ``rms_slope`` as given, or a height map's
+    own, sqrt(<|grad h|^2>) by differences between neighbouring pixels; 0 otherwise (the
+    smooth bodies' slopes are those of their radius)."""
+    if p.shape == "height_map":
+        import numpy as np
+
+        from .surfaces import heights_in_run_units, load_height_map, map_pixel
+        hm = load_height_map(p.height_map)
+        h, a = heights_in_run_units(p, hm), map_pixel(p, hm)
+        gx, gy = np.diff(h, axis=0) / a, np.diff(h, axis=1) / a
+        return float(np.sqrt(np.mean(gx * gx) + np.mean(gy * gy)))
+    return float(p.rms_slope)
 
 
 # ---- estimates (no NumPy needed: cheap enough for a million-run campaign) -----------
@@ -350,6 +372,13 @@ def check(p, memory: bool = True) -> list[str]:
     # An explicit max_load is the user's preload, as an explicit max_indent is (not flagged:
     # at 1/32 a max_load of 0.004, depth 0.045 where the estimate asks 0.082, gave a jump-off
     # of 0.00383539 against 0.00383539 from the estimate's depth, 2026-11-25)
+    slope = surface_rms_slope(p)
+    if slope > MAX_RMS_SLOPE:
+        what = "the map's" if p.shape == "height_map" else "the requested"
+        notes.append(f"{'height_map' if p.shape == 'height_map' else 'rms_slope'}: {what} rms slope is "
+                     f"{slope:.3g}, steeper than {MAX_RMS_SLOPE:g} (45 degrees): the half-space (Boussinesq) model "
+                     "assumes gentle slopes" + (" -- are the heights and the pixel size in the same length unit?"
+                                                if p.shape == "height_map" else ""))
     explicit_load = p.control == "force" and p.max_load is not None
     if p.max_indent == "auto" and p.shape != "flat_punch" and not explicit_load:
         from .protocol import n_loading_steps
