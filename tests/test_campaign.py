@@ -235,6 +235,41 @@ def test_runs_from_other_code_are_reported_stale_and_can_be_rerun(tmp_path, monk
     assert "2 runs done, 0 failed, 0 already done" in capsys.readouterr().err
 
 
+def test_runs_computed_by_other_code_are_reported_as_they_arrive(tmp_path, monkeypatch, capsys):
+    """A Dask cluster running another version of tfm filled the tables in silence: its
+    runs were stale as soon as they were stored (and --rerun-stale on the same cluster
+    made them stale again). Here the workers' other code is a result's provenance."""
+    spec = spec_from_dict({"name": "elsewhere", "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
+                                                         "max_indent": 0.05, "step": 5e-3},
+                           "sweep": {"alpha": [0.5, 0.75]}}, source="elsewhere")
+    real = importlib.import_module("tfm.campaign.runner").execute
+
+    def other_code(*args, **kwargs):
+        outcome = real(*args, **kwargs)
+        outcome.result.provenance["code_hash"] = "0" * 64
+        return outcome
+
+    monkeypatch.setattr("tfm.campaign.runner.execute", other_code)
+    run_campaign(spec, results_dir=tmp_path, quiet=True)
+    err = capsys.readouterr().err
+    assert err.count("was computed by other tfm source code (prov_code_hash 000000000000") == 1   # once
+    assert "2 runs were computed by other tfm source code" in err
+
+
+def test_the_resume_hint_of_a_dask_campaign_keeps_its_scheduler(tmp_path):
+    """Followed as written, the hint resumed a Dask campaign locally, one run at a time."""
+    from types import SimpleNamespace
+
+    from tfm.campaign.runner import _again
+
+    spec = load_spec(SMOKE)
+    store = CampaignStore.for_spec(spec, tmp_path)
+    client = SimpleNamespace(scheduler=SimpleNamespace(address="tcp://10.0.0.7:8786"))
+    assert _again(spec, store, client) == (f"`tfm campaign run {spec.source} --results-dir {tmp_path} "
+                                           "--scheduler tcp://10.0.0.7:8786`")
+    assert "--scheduler" not in _again(spec, store)
+
+
 def test_the_code_a_process_computes_with_is_read_once(monkeypatch):
     """A campaign's runs took the commit from the disk as each run started: after a commit
     made mid-campaign, runs computed by the code already loaded were labelled with the new

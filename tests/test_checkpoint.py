@@ -302,6 +302,27 @@ def test_a_campaign_says_when_it_sets_a_checkpoint_aside(tmp_path, capsys):
     assert summary["prov_resumed_at_step"].iloc[0] == 0
 
 
+def test_a_campaign_says_when_its_checkpoints_cannot_be_saved(tmp_path, capsys, monkeypatch):
+    """A full disk: every checkpoint save of a campaign run failed, and the campaign said
+    "1 runs done", exit 0, with nothing in its tables (tfm run warns)."""
+    import errno
+
+    def full_disk(fh, **arrays):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(tfm.checkpoint.np, "savez", full_disk)
+    spec = spec_from_dict({"name": "full", "base": {"spacing": "1/32", "k_th": 0.02, "shape": "paraboloid",
+                                                    "max_indent": 0.02, "step": 1e-3}})
+    (run,) = spec.runs
+    run_campaign(spec, results_dir=tmp_path, checkpoint_every=0, quiet=True)      # quiet too
+    err = capsys.readouterr().err
+    assert f"warning: run 0 {run.run_id}: " in err and "checkpoint save(s) failed (cannot save the checkpoint" in err
+    assert "No space left on device); the run went on without one" in err
+    summary, _ = load_tables(CampaignStore.for_spec(spec, tmp_path).root)
+    assert summary["prov_checkpoint_failed_saves"].iloc[0] > 0
+    assert summary["prov_checkpoint_save_error"].iloc[0].endswith("No space left on device")
+
+
 CLI_RUN = ["run", "--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.02",
            "--step", "1e-3", "--no-plot"]
 

@@ -158,6 +158,7 @@ class Checkpoint:
         self.set_aside = None      # why a checkpoint found here was not used
         self.save_when_done = False  # also save the finished curve (phase DONE)
         self.failed_saves = 0      # saves that could not be written (try_save)
+        self.save_error = ""       # the first one's reason
         self.started_at = None     # when the run first started (saved; a resumed run keeps it)
 
     # ---- reading -------------------------------------------------------------
@@ -229,6 +230,7 @@ class Checkpoint:
         except OSError as exc:
             self._last = time.monotonic()
             if not self.failed_saves:
+                self.save_error = str(exc.strerror or exc)
                 warnings.warn(f"run {self.run_id}: {exc}; the run goes on without it"
                               + (f" and tries again every {self.every:g} s" if phase != DONE else ""),
                               CheckpointWarning, stacklevel=2)

@@ -161,6 +161,9 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
         prov["started_at"] = ckpt.started_at     # when the run first started, not this process
     # always present (empty when none), so that every campaign table has the column
     prov["checkpoint_set_aside"] = (ckpt.set_aside or "") if ckpt is not None else ""
+    # saves that failed (a full disk): the run had less protection than asked for
+    prov["checkpoint_failed_saves"] = ckpt.failed_saves if ckpt is not None else 0
+    prov["checkpoint_save_error"] = ckpt.save_error if ckpt is not None else ""
     if ckpt is not None and not keep_checkpoint:
         ckpt.remove()
     res = RunResult(p, curve, summary, prov)

@@ -217,16 +217,17 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
     if stop.signum is not None:
         left = [r for r in todo if r.run_id not in handled]
         if left:
-            raise _interrupted(spec, store, left, stop.signum)
+            raise _interrupted(spec, store, left, stop.signum, client)
         # the signal came after the last run was stored and the tables written: complete
         print(f"campaign {spec.name}: a stop signal came after every run had finished; the campaign "
               "is complete", file=sys.stderr)
     return store.root
 
 
-def _interrupted(spec, store, unfinished: list[Run], signum: int) -> CampaignInterrupted:
+def _interrupted(spec, store, unfinished: list[Run], signum: int, client=None) -> CampaignInterrupted:
     kept = sum(store.checkpoint_path(r.run_id).exists() for r in unfinished)
-    again = _again(spec, store)
+    # a Dask campaign resumed without --scheduler would run locally, one run at a time
+    again = _again(spec, store, client)
     return CampaignInterrupted(
         f"campaign {spec.name} interrupted by {signal.Signals(signum).name}: the finished runs are "
         f"stored in {store.root}; {len(unfinished)} runs did not finish, {kept} of them with a checkpoint "
@@ -256,15 +257,31 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
     """Store each outcome as it comes; ``handled`` collects the ids stored, also when the
     outcomes stop early (an interrupted campaign). ``skipped`` runs were done before,
     ``left_out`` not done and not selected (for the closing line)."""
+    from ..results import code_hash
+
     bar = _progress(spec.name, len(todo), quiet)
     failed = 0
+    here, other_code = code_hash(), 0
     try:
         for run, outcome in outcomes:
             if outcome.result is not None:
                 _storing(run, store, spec, lambda: store.write_run(run, outcome.result, outcome.fields_bytes))
-                set_aside = outcome.result.provenance.get("checkpoint_set_aside")
+                prov = outcome.result.provenance
+                set_aside = prov.get("checkpoint_set_aside")
                 if set_aside and not quiet:
                     bar.write(f"warning: run {run.index} {run.run_id}: {set_aside}", file=sys.stderr)
+                if prov.get("checkpoint_failed_saves"):
+                    # even with quiet: the run had no protection against a crash
+                    bar.write(f"warning: run {run.index} {run.run_id}: {prov['checkpoint_failed_saves']} "
+                              f"checkpoint save(s) failed ({prov.get('checkpoint_save_error', '')}); the run "
+                              "went on without one", file=sys.stderr)
+                if prov.get("code_hash") and prov["code_hash"] != here:
+                    other_code += 1
+                    if other_code == 1:    # once: a whole cluster usually runs the same code
+                        bar.write(f"warning: campaign {spec.name}: run {run.index} was computed by other tfm "
+                                  f"source code (prov_code_hash {prov['code_hash'][:12]}, here {here[:12]}): "
+                                  "the Dask workers run another version of tfm. Its results are stored and "
+                                  "count as stale; run the workers from this code", file=sys.stderr)
             else:
                 failed += 1
                 _storing(run, store, spec, lambda: store.write_failure(run, outcome.error, outcome.traceback))
@@ -276,16 +293,22 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
     finally:
         outcomes.close()
         bar.close()
+    if other_code > 1:
+        print(f"warning: campaign {spec.name}: {other_code} runs were computed by other tfm source code "
+              "(see prov_code_hash)", file=sys.stderr)
     if not quiet and len(handled) == len(todo):
         print(f"campaign {spec.name}: {len(todo) - failed} runs done, {failed} failed, "
               f"{skipped} already done" + (f", {left_out} not selected" if left_out else "")
               + f" -> {store.root}", file=sys.stderr)
 
 
-def _again(spec, store) -> str:
-    """How to run the campaign again: its command, or, for a campaign made in Python,
-    the same call."""
-    return f"`{store.run_command(spec.source)}`" if spec.origin else "the same call"
+def _again(spec, store, client=None) -> str:
+    """How to run the campaign again: its command (on the same Dask cluster, given its
+    ``client``), or, for a campaign made in Python, the same call."""
+    if not spec.origin:
+        return "the same call"
+    address = getattr(getattr(client, "scheduler", None), "address", None) if client is not None else None
+    return f"`{store.run_command(spec.source)}{f' --scheduler {address}' if address else ''}`"
 
 
 def _storing(run, store, spec, write) -> None:
