@@ -1071,7 +1071,7 @@ def test_a_damaged_run_file_is_named_with_its_remedy(tmp_path, capsys):
     assert len(load_tables(spec, results_dir=tmp_path)[0]) == 2
 
 
-def test_a_disk_that_refuses_a_write_stops_the_campaign_with_a_message(tmp_path, monkeypatch):
+def test_a_disk_that_refuses_a_write_stops_the_campaign_with_a_message(tmp_path, monkeypatch, capsys):
     """A full disk or a read-only folder ended the campaign with a raw traceback (a run
     file) or left no tables and no word that the runs were safe (the tables)."""
     spec = _tiny("disk")
@@ -1099,6 +1099,9 @@ def test_a_disk_that_refuses_a_write_stops_the_campaign_with_a_message(tmp_path,
                                             "is stored in"):
         run_campaign(load_spec(toml), quiet=True, results_dir=tmp_path)
     assert len(store.status(spec).done) == 2
+    # exit status 1, as tfm run's for an output lost after computing (2 is bad input, before)
+    assert tfm_main(["campaign", "run", str(toml), "--results-dir", str(tmp_path), "-q"]) == 1
+    assert "cannot write the campaign's tables" in capsys.readouterr().err
 
 
 def test_one_flipped_bit_in_a_run_file_is_found(tmp_path, capsys):

@@ -470,7 +470,7 @@ def main(argv=None) -> int:
         return code
     except ParameterError as exc:
         print(f"tfm: error: {exc}", file=sys.stderr)
-        return 2
+        return getattr(exc, "exit_status", 2)     # 1: an output lost after computing
     except MemoryError:
         # a traceback from deep inside NumPy said nothing a user could act on
         say("tfm: error: out of memory: the run needed more than this process could get (the estimate "

@@ -20,7 +20,8 @@ def register(subparsers) -> None:
 
     run = sub.add_parser("run", help="run the runs not yet stored (resumes after a crash)",
                          description="Run a campaign. Finished runs are skipped, failed and "
-                                     "unfinished ones are (re)done. Exit status 1 if a run failed.")
+                                     "unfinished ones are (re)done. Exit status 1 if a run failed, or "
+                                     "if a computed run or the tables could not be stored; 2: bad input.")
     run.add_argument("file", help="campaign file, e.g. campaigns/smoke.toml")
     run.add_argument("-j", "--jobs", type=int, default=1,
                      help="local worker processes; the cores are divided among them (default 1)")

@@ -44,6 +44,14 @@ class Outcome:
     fields_bytes: bytes | None = None   # field snapshots sent back by a remote (Dask) worker
 
 
+class CampaignStorageError(CampaignError):
+    """Computed runs or tables that could not be stored (a full or read-only disk): exit
+    status 1, as `tfm run`'s for an output not written after the run (2 is bad input,
+    before any computation)."""
+
+    exit_status = 1
+
+
 class CampaignInterrupted(KeyboardInterrupt):
     """SIGINT or SIGTERM stopped a campaign after it stored every run that had finished."""
 
@@ -210,7 +218,7 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
             try:
                 store.write_tables(spec)
             except OSError as exc:
-                raise CampaignError(
+                raise CampaignStorageError(
                     f"cannot write the campaign's tables in {store.root}: {exc.strerror or exc}. Every run is "
                     f"stored in {store.runs_dir}; free space or fix the permissions, then run "
                     f"{_again(spec, store)} again to write them") from None
@@ -318,7 +326,7 @@ def _storing(run, store, spec, write) -> None:
         write()
     except OSError as exc:
         kept = store.checkpoint_path(run.run_id).exists()
-        raise CampaignError(
+        raise CampaignStorageError(
             f"cannot store run {run.index} {run.run_id} in {store.root}: {exc.strerror or exc}"
             f"{f' ({exc.filename})' if getattr(exc, 'filename', None) else ''}. The runs stored before it "
             f"are kept{'; its finished curve is in its checkpoint' if kept else ''}. Free space or fix the "
