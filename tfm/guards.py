@@ -85,16 +85,11 @@ def _guard(notes: list, allowed: set, guard: str, message: str) -> None:
 
 def surface_rms_slope(p) -> float:
     """The rms slope of the body's roughness: ``rms_slope`` as given, or a height map's
-    own, sqrt(<|grad h|^2>) by differences between neighbouring pixels; 0 otherwise (the
-    smooth bodies' slopes are those of their radius)."""
+    own (tfm.surfaces.map_rms_slope); 0 otherwise (the smooth bodies' slopes are those of
+    their radius)."""
     if p.shape == "height_map":
-        import numpy as np
-
-        from .surfaces import heights_in_run_units, load_height_map, map_pixel
-        hm = load_height_map(p.height_map)
-        h, a = heights_in_run_units(p, hm), map_pixel(p, hm)
-        gx, gy = np.diff(h, axis=0) / a, np.diff(h, axis=1) / a
-        return float(np.sqrt(np.mean(gx * gx) + np.mean(gy * gy)))
+        from .surfaces import load_height_map, map_rms_slope
+        return map_rms_slope(p, load_height_map(p.height_map))
     return float(p.rms_slope)
 
 
@@ -368,17 +363,17 @@ def check(p, memory: bool = True) -> list[str]:
             _guard(notes, allowed, "memory", f"spacing/extent: the run needs about {need / 2**30:.1f} GiB "
                               f"({n_springs(p):,} springs, operator {p.operator}) but "
                               f"{have / 2**30:.1f} GiB is available. Coarsen the spacing or shrink extent")
+    slope = surface_rms_slope(p)
+    if slope > MAX_RMS_SLOPE:
+        is_map = p.shape == "height_map"
+        whose = "height_map: the map's" if is_map else "rms_slope: the requested"
+        notes.append(f"{whose} rms slope is {slope:.3g}, steeper than {MAX_RMS_SLOPE:g} (45 degrees): the half-space "
+                     "(Boussinesq) model assumes gentle slopes"
+                     + (" -- are the heights and the pixel size in the same length unit?" if is_map else ""))
     # a flat punch is in full contact at any depth: its pull-off does not depend on the preload.
     # An explicit max_load is the user's preload, as an explicit max_indent is (not flagged:
     # at 1/32 a max_load of 0.004, depth 0.045 where the estimate asks 0.082, gave a jump-off
     # of 0.00383539 against 0.00383539 from the estimate's depth, 2026-11-25)
-    slope = surface_rms_slope(p)
-    if slope > MAX_RMS_SLOPE:
-        what = "the map's" if p.shape == "height_map" else "the requested"
-        notes.append(f"{'height_map' if p.shape == 'height_map' else 'rms_slope'}: {what} rms slope is "
-                     f"{slope:.3g}, steeper than {MAX_RMS_SLOPE:g} (45 degrees): the half-space (Boussinesq) model "
-                     "assumes gentle slopes" + (" -- are the heights and the pixel size in the same length unit?"
-                                                if p.shape == "height_map" else ""))
     explicit_load = p.control == "force" and p.max_load is not None
     if p.max_indent == "auto" and p.shape != "flat_punch" and not explicit_load:
         from .protocol import n_loading_steps

@@ -267,6 +267,17 @@ class HeightMap:
         if unit is not None:                 # scales heights and pixel (unit_to_metres)
             digest.update(unit.encode())
         self.sha256 = digest.hexdigest()
+        self._step_rms = None
+
+    @property
+    def step_rms(self) -> float:
+        """sqrt(<|grad h|^2>) in file units per pixel, by differences between neighbouring
+        pixels; computed once per map (a campaign checks every run against it)."""
+        if self._step_rms is None:
+            h = self.heights
+            gx, gy = np.diff(h, axis=0), np.diff(h, axis=1)
+            self._step_rms = float(np.sqrt(np.mean(gx * gx) + np.mean(gy * gy)))
+        return self._step_rms
 
 
 @contextlib.contextmanager
@@ -338,16 +349,10 @@ def _read_with_surface_topography(file: Path):
     try:
         with open_topography(str(file)) as reader:
             channel = reader.default_channel
-            if channel.physical_sizes is None:
-                # a plain matrix (text): heights only, read as a .npy (map_pixel_size, or the
-                # spacing) instead of "physical_sizes could not be extracted, you must provide it"
-                topo = reader.topography(physical_sizes=channel.nb_grid_pts)
-                if topo.dim != 2:
-                    raise MapError(f"height_map: {str(file)!r} is a line scan, not a 2-D map")
-                return np.array(topo.heights(), dtype=np.float64), None, None
-            topo = reader.topography()
-    except MapError:
-        raise
+            # a plain matrix (text) has no size: its heights are read as a .npy's are
+            # (map_pixel_size, or the spacing), not refused for the size it lacks
+            sized = channel.physical_sizes is not None
+            topo = reader.topography() if sized else reader.topography(physical_sizes=channel.nb_grid_pts)
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad map
         if type(exc).__name__ == "CannotDetectFileFormat":
             # its message lists every reader it tried (48 lines for a .csv)
@@ -357,6 +362,8 @@ def _read_with_surface_topography(file: Path):
         raise MapError(f"height_map: SurfaceTopography cannot read {str(file)!r}: {exc}") from None
     if topo.dim != 2:
         raise MapError(f"height_map: {str(file)!r} is a line scan, not a 2-D map")
+    if not sized:
+        return np.asarray(topo.heights()), None, None
     sx, sy = topo.physical_sizes
     nx, ny = topo.nb_grid_pts
     if not math.isclose(sx / nx, sy / ny, rel_tol=1e-9):
@@ -384,8 +391,20 @@ def map_pixel(p, hm: HeightMap) -> float:
     return float(p.spacing)
 
 
+def _height_scale(p, hm: HeightMap) -> float:
+    """Run length units per height unit of the map: a file with its own size has a unit,
+    a map without one (.npy, text) is in the run's units."""
+    return unit_to_metres(hm.unit, p) if hm.pixel_size is not None else 1.0
+
+
 def heights_in_run_units(p, hm: HeightMap) -> np.ndarray:
-    return hm.heights * unit_to_metres(hm.unit, p) if hm.pixel_size is not None else hm.heights
+    scale = _height_scale(p, hm)
+    return hm.heights * scale if scale != 1.0 else hm.heights
+
+
+def map_rms_slope(p, hm: HeightMap) -> float:
+    """The map's rms slope in the run: heights and pixel in one length unit."""
+    return hm.step_rms * _height_scale(p, hm) / map_pixel(p, hm)
 
 
 # SurfaceTopography's length units (it writes and reads "A" as "Å")
