@@ -265,11 +265,11 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
     """Store each outcome as it comes; ``handled`` collects the ids stored, also when the
     outcomes stop early (an interrupted campaign). ``skipped`` runs were done before,
     ``left_out`` not done and not selected (for the closing line)."""
-    from ..results import code_hash
+    from .store import code_here, same_code
 
     bar = _progress(spec.name, len(todo), quiet)
     failed = 0
-    here, other_code = code_hash(), 0
+    here, other_code = code_here(), 0
     try:
         for run, outcome in outcomes:
             if outcome.result is not None:
@@ -283,11 +283,12 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
                     bar.write(f"warning: run {run.index} {run.run_id}: {prov['checkpoint_failed_saves']} "
                               f"checkpoint save(s) failed ({prov.get('checkpoint_save_error', '')}); the run "
                               "went on without one", file=sys.stderr)
-                if prov.get("code_hash") and prov["code_hash"] != here:
+                if not same_code(prov, here):      # the test that makes a stored run stale
                     other_code += 1
                     if other_code == 1:    # once: a whole cluster usually runs the same code
                         bar.write(f"warning: campaign {spec.name}: run {run.index} was computed by other tfm "
-                                  f"source code (prov_code_hash {prov['code_hash'][:12]}, here {here[:12]}): "
+                                  f"source code (prov_code_hash {prov.get('code_hash', '')[:12]}, here "
+                                  f"{here['code_hash'][:12]}): "
                                   "the Dask workers run another version of tfm. Its results are stored and "
                                   "count as stale; run the workers from this code", file=sys.stderr)
             else:

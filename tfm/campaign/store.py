@@ -63,7 +63,12 @@ class Status:
         return len(self.done) + len(self.failed) + len(self.pending)
 
 
-def _same_code(prov: dict[str, Any], here: dict[str, Any]) -> bool:
+def code_here() -> dict[str, Any]:
+    """What names the code this process computes with, as a run's provenance does."""
+    return {"tfm_version": tfm_version(), "git_commit": loaded_commit(), "code_hash": code_hash()}
+
+
+def same_code(prov: dict[str, Any], here: dict[str, Any]) -> bool:
     """Whether a stored run's provenance names the code ``here`` computes with: the hash of
     tfm's source files, so that uncommitted edits count and a commit that leaves tfm/ alone
     does not. Runs stored before the hash was recorded: tfm version and commit (a dirty
@@ -254,7 +259,7 @@ class CampaignStore:
 
     def status(self, spec: CampaignSpec) -> Status:
         done, failed, pending, flagged, stale = [], [], [], [], []
-        here = {"tfm_version": tfm_version(), "git_commit": loaded_commit(), "code_hash": code_hash()}
+        here = code_here()
         for run in spec.runs:
             rid = run.run_id
             meta = self.run_metadata(rid)
@@ -262,7 +267,7 @@ class CampaignStore:
                 done.append(rid)
                 if meta.get("summary", {}).get("warnings"):
                     flagged.append(rid)
-                if not _same_code(meta.get("provenance") or {}, here):
+                if not same_code(meta.get("provenance") or {}, here):
                     stale.append(rid)
             elif self.failure_path(rid).exists():
                 failed.append(rid)
