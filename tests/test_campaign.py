@@ -1193,6 +1193,9 @@ def test_a_dask_campaign_without_workers_says_so(tmp_path, monkeypatch, capsys):
 
     distributed = pytest.importorskip("distributed")
     monkeypatch.setattr(runner, "NO_WORKERS_NOTE", 0.5)
+    from tqdm.auto import tqdm
+    written, write = [], tqdm.write
+    monkeypatch.setattr(tqdm, "write", lambda s, *a, **k: (written.append(s), write(s, *a, **k)))
     with distributed.LocalCluster(n_workers=0, processes=False, protocol="tcp", dashboard_address=None) as cluster:
         timer = threading.Timer(3.0, os.kill, (os.getpid(), signal.SIGINT))
         timer.start()
@@ -1202,6 +1205,8 @@ def test_a_dask_campaign_without_workers_says_so(tmp_path, monkeypatch, capsys):
         finally:
             timer.cancel()
     assert "no Dask worker has been connected to tcp://" in capsys.readouterr().err
+    # through tqdm.write, which puts it above a progress bar, not at the end of the bar's line
+    assert any("no Dask worker" in w for w in written)
 
 
 def test_a_base_key_that_applies_to_no_run_is_warned_about_once(tmp_path):
@@ -1277,3 +1282,56 @@ def test_campaign_list_exits_2_on_an_invalid_file_and_a_bom_is_named(tmp_path, c
     assert main(["campaign", "list", "--dir", str(tmp_path), "--results-dir", str(tmp_path / "r")]) == 2
     out = capsys.readouterr().out
     assert "bom" in out and "byte order mark (BOM)" in out and "good" in out
+
+
+def test_a_file_where_a_campaign_folder_should_be_is_named_before_any_run(tmp_path):
+    """A file named runs where the run files go: the campaign computed its first run, then
+    stopped with "free space or fix the permissions" (a user's try)."""
+    spec = _tiny("blocked")
+    store = CampaignStore.for_spec(spec, tmp_path)
+    store.root.mkdir()
+    store.runs_dir.write_text("not a folder")
+    with pytest.raises(CampaignError, match=r"results-dir: .*runs is a file, where the campaign keeps its "
+                                            r"runs/ folder; move it away"):
+        run_campaign(spec, quiet=True, results_dir=tmp_path)
+    assert not store.checkpoints_dir.exists() and not store.table_path("summary").exists()
+
+
+def test_status_of_a_results_dir_that_does_not_exist(tmp_path, capsys):
+    """A mistyped --results-dir showed every run as pending, as if nothing had been computed."""
+    spec = _tiny("elsewhere")
+    toml = _toml_of(spec, tmp_path)
+    run_campaign(spec, quiet=True, results_dir=tmp_path / "res")
+    capsys.readouterr()
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path / "rse")]) == 2
+    assert f"results-dir: {tmp_path / 'rse'} is not a folder" in capsys.readouterr().err
+    assert tfm_main(["campaign", "list", "--dir", str(tmp_path), "--results-dir", str(tmp_path / "rse")]) == 2
+    # an existing folder without this campaign: pending, and said why
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "2 pending" in out and f"nothing stored yet: {tmp_path / 'elsewhere'} does not exist" in out
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path / "res")]) == 0
+    out = capsys.readouterr().out
+    assert "2 done" in out and "nothing stored" not in out
+
+
+def test_a_damaged_run_file_is_reported_then_computed_again(tmp_path, capsys):
+    """A run file cut short (a disk error, a bad copy) was computed again without a word:
+    status counted it pending like a run never started."""
+    spec = _tiny("damaged")
+    toml = _toml_of(spec, tmp_path)
+    run_campaign(spec, quiet=True, results_dir=tmp_path)
+    store = CampaignStore.for_spec(spec, tmp_path)
+    rid = spec.runs[1].run_id
+    data, curve = store.run_path(rid).read_bytes(), pd.read_parquet(store.run_path(rid))
+    store.run_path(rid).write_bytes(data[:len(data) // 2])
+    capsys.readouterr()
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "1 done" in out and "1 pending" in out
+    assert (f"1 run file in {store.runs_dir} cannot be read as the run it is named after (damaged or cut "
+            f"short? e.g. {rid}.parquet): that run is pending and computed again") in out
+    run_campaign(spec, quiet=True, results_dir=tmp_path)       # said even with quiet
+    assert "warning: campaign damaged: 1 run file" in capsys.readouterr().err
+    assert store.status(spec).done == spec.run_ids
+    assert_bitwise_equal(pd.read_parquet(store.run_path(rid)), curve)

@@ -380,7 +380,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "(default 600 for displacement control without snapshots)")
     run.add_argument("--no-checkpoints", action="store_true", help="save no checkpoint")
     run.add_argument("-q", "--quiet", action="store_true",
-                     help="no header, progress, summary or 'wrote' line: warnings and errors only")
+                     help="no header, progress, summary or 'wrote' line: warnings, errors and the lines "
+                          "of a stop signal (where the state is saved) only")
     run.set_defaults(func=cmd_run)
     from .campaign.cli import register
     register(sub)

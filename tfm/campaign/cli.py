@@ -10,6 +10,8 @@ from pathlib import Path
 from ..progress import say
 from .spec import CampaignError, load_spec
 
+RESULTS_DIR = "results"      # default parent of results/<name>/
+
 
 def register(subparsers) -> None:
     camp = subparsers.add_parser(
@@ -28,8 +30,9 @@ def register(subparsers) -> None:
     run.add_argument("--scheduler", metavar="ADDR", default=None,
                      help="run on a Dask distributed cluster, e.g. tcp://host:8786")
     run.add_argument("-q", "--quiet", action="store_true",
-                     help="no progress bar or messages (the bar is also off when CI=true)")
-    run.add_argument("--results-dir", default="results", help="parent of results/<name>/ (default results)")
+                     help="no progress bar or closing line (the bar is also off when CI=true); "
+                          "warnings, errors and the lines of a stop signal stay")
+    run.add_argument("--results-dir", default=RESULTS_DIR, help="parent of results/<name>/ (default results)")
     run.add_argument("--skip-failed", action="store_true",
                      help="do not retry runs that failed before")
     run.add_argument("--rerun-stale", action="store_true",
@@ -46,13 +49,13 @@ def register(subparsers) -> None:
                                            "(exit status 1 if any failed)")
     status.add_argument("file")
     _max_runs_flag(status)
-    status.add_argument("--results-dir", default="results")
+    status.add_argument("--results-dir", default=RESULTS_DIR)
     status.add_argument("-v", "--verbose", action="store_true", help="one line per run")
     status.set_defaults(func=cmd_status)
 
     lst = sub.add_parser("list", help="the campaign files and their progress")
     lst.add_argument("--dir", default="campaigns", help="folder of campaign files (default campaigns)")
-    lst.add_argument("--results-dir", default="results")
+    lst.add_argument("--results-dir", default=RESULTS_DIR)
     lst.set_defaults(func=cmd_list)
 
     expand = sub.add_parser("expand", help="print the runs a campaign file expands to")
@@ -121,14 +124,17 @@ def cmd_status(args) -> int:
     if conflict:
         print(f"tfm: error: {conflict}", file=sys.stderr)
         return 2
+    _check_results_dir(args.results_dir)
     st = store.status(spec)
     print(f"{spec.name}: {st.total} runs: {len(st.done)} done ({len(st.flagged)} flagged), "
           f"{len(st.pending)} pending, {len(st.failed)} failed"
           + (f", {len(st.stale)} computed by other tfm code (--rerun-stale)" if st.stale else "")
           + f"  [{store.root}]")
-    extra = store.extra_note(st)
-    if extra:
-        print(f"  {extra}")
+    if not store.root.is_dir():
+        print(f"  nothing stored yet: {store.root} does not exist (not run with this --results-dir)")
+    for note in (store.damaged_note(st), store.extra_note(st)):
+        if note:
+            print(f"  {note}")
     holder = store.running()
     if holder:
         print(f"  {holder} is running this campaign now: the tables are rebuilt when it finishes")
@@ -158,6 +164,13 @@ def cmd_status(args) -> int:
     return 1 if st.failed else 0
 
 
+def _check_results_dir(results_dir: str) -> None:
+    """A results folder to read must exist (a mistyped one showed every run as pending);
+    the default one may not exist yet."""
+    if results_dir != RESULTS_DIR and not Path(results_dir).expanduser().is_dir():
+        raise CampaignError(f"results-dir: {results_dir} is not a folder")
+
+
 def _checkpoints(store, run_ids) -> dict[str, str]:
     """run id -> what its checkpoint holds, for the runs in ``run_ids`` that have one."""
     if not store.checkpoints_dir.is_dir():
@@ -183,6 +196,7 @@ def cmd_list(args) -> int:
 
     if not Path(args.dir).is_dir():
         raise CampaignError(f"dir: {args.dir} is not a folder")
+    _check_results_dir(args.results_dir)
     files = sorted(Path(args.dir).glob("*.toml"))
     if not files:
         print(f"no campaign files in {args.dir}/", file=sys.stderr)

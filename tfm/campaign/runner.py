@@ -174,6 +174,9 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
         extra = store.extra_note(status)
         if extra and not quiet:
             print(f"campaign {spec.name}: {extra}", file=sys.stderr)
+        damaged = store.damaged_note(status)
+        if damaged:                        # even with quiet: stored data were lost
+            print(f"warning: campaign {spec.name}: {damaged}", file=sys.stderr)
         left_out = 0
         if only is not None:                 # run ids, or the Run records select_runs returns
             chosen = {getattr(r, "run_id", r) for r in only}
@@ -664,6 +667,7 @@ def _run_dask(todo: list[Run], client,
               stop: _Stop | None = None) -> Iterator[tuple[Run, Outcome]]:
     from distributed import as_completed as dask_completed
     from distributed.comm import get_address_host
+    from tqdm.auto import tqdm
 
     host_threads: dict[str, int] = {}
     for addr, info in client.scheduler_info().get("workers", {}).items():
@@ -687,9 +691,10 @@ def _run_dask(todo: list[Run], client,
                     alone_since = alone_since or time.monotonic()
                     if time.monotonic() - alone_since >= NO_WORKERS_NOTE:
                         said = True
-                        print(f"tfm: no Dask worker has been connected to {client.scheduler.address} for "
-                              f"{NO_WORKERS_NOTE:g} s; the campaign waits for one (Ctrl-C stops it; the runs "
-                              "stored so far stay)", file=sys.stderr, flush=True)
+                        # tqdm.write: on a line of its own, above the progress bar
+                        tqdm.write(f"tfm: no Dask worker has been connected to {client.scheduler.address} for "
+                                   f"{NO_WORKERS_NOTE:g} s; the campaign waits for one (Ctrl-C stops it; the "
+                                   "runs stored so far stay)", file=sys.stderr)
                 else:
                     alone_since = None
             for fut in batch:

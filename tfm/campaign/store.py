@@ -57,6 +57,9 @@ class Status:
     # stored runs and failures of run ids the file no longer expands to (values removed
     # from it): kept on disk, left out of the tables
     extra: list[str] = dataclasses.field(default_factory=list)
+    # pending runs whose run file exists but cannot be read, or names another run: they
+    # are computed again and the new file replaces the damaged one
+    damaged: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def total(self) -> int:
@@ -143,6 +146,12 @@ class CampaignStore:
         except OSError as exc:                # before any run: say where, not a traceback
             raise CampaignError(f"results-dir: cannot write the campaign folder {self.root}: "
                                 f"{exc.strerror or exc}") from None
+        for folder in (self.runs_dir, self.failures_dir, self.checkpoints_dir):
+            if folder.exists() and not folder.is_dir():
+                # found before any run, not as a full disk after the first one
+                fh.close()
+                raise CampaignError(f"results-dir: {folder} is a file, where the campaign keeps its "
+                                    f"{folder.name}/ folder; move it away")
         with fh:
             deadline = time.monotonic() + wait
             while True:
@@ -258,7 +267,7 @@ class CampaignStore:
             return None
 
     def status(self, spec: CampaignSpec) -> Status:
-        done, failed, pending, flagged, stale = [], [], [], [], []
+        done, failed, pending, flagged, stale, damaged = [], [], [], [], [], []
         here = code_here()
         for run in spec.runs:
             rid = run.run_id
@@ -273,7 +282,9 @@ class CampaignStore:
                 failed.append(rid)
             else:
                 pending.append(rid)
-        return Status(done, failed, pending, flagged, stale, self._not_in(spec))
+                if self.run_path(rid).exists():
+                    damaged.append(rid)
+        return Status(done, failed, pending, flagged, stale, self._not_in(spec), damaged)
 
     def _not_in(self, spec: CampaignSpec, where=None) -> list[str]:
         """Run ids stored here that ``spec`` does not expand to: in ``where``, (folder, glob)
@@ -287,6 +298,16 @@ class CampaignStore:
         """Run ids of the checkpoints whose runs ``spec`` no longer holds (an edit removed
         their values): nothing would ever continue or remove them."""
         return self._not_in(spec, ((self.checkpoints_dir, "*.npz"),))
+
+    def damaged_note(self, status: Status) -> str | None:
+        """What to say about run files that exist but cannot be read, if any."""
+        if not status.damaged:
+            return None
+        n, first = len(status.damaged), self.run_path(status.damaged[0])
+        return (f"{n} run file{'s' if n > 1 else ''} in {self.runs_dir} cannot be read as the run "
+                f"{'they are' if n > 1 else 'it is'} named after (damaged or cut short? e.g. {first.name}): "
+                f"{'those runs are' if n > 1 else 'that run is'} pending and computed again, the new file "
+                "replacing the damaged one")
 
     def extra_note(self, status: Status) -> str | None:
         """What to say about stored runs the campaign file no longer has, if any."""
