@@ -1276,10 +1276,10 @@ def test_campaign_list_exits_2_on_an_invalid_file_and_a_bom_is_named(tmp_path, c
 
     good = SMOKE.read_text()
     (tmp_path / "good.toml").write_text(good)
-    assert main(["campaign", "list", "--dir", str(tmp_path), "--results-dir", str(tmp_path / "r")]) == 0
+    assert main(["campaign", "list", "--dir", str(tmp_path), "--results-dir", str(tmp_path)]) == 0
     (tmp_path / "bom.toml").write_bytes(b"\xef\xbb\xbf" + good.replace('name = "smoke"', 'name = "bom"').encode())
     capsys.readouterr()
-    assert main(["campaign", "list", "--dir", str(tmp_path), "--results-dir", str(tmp_path / "r")]) == 2
+    assert main(["campaign", "list", "--dir", str(tmp_path), "--results-dir", str(tmp_path)]) == 2
     out = capsys.readouterr().out
     assert "bom" in out and "byte order mark (BOM)" in out and "good" in out
 
