@@ -186,6 +186,28 @@ def test_a_checkpoint_of_another_run_or_engine_is_set_aside(reference, tmp_path,
         simulate(P, keep_checkpoint=True)
 
 
+def test_checkpoint_arguments_of_the_wrong_kind_are_refused_by_name(tmp_path):
+    """A .npy array saved under .npz gave "TypeError: 'numpy.ndarray' object does not
+    support the context manager protocol"; checkpoint=True a TypeError from pathlib; a folder
+    was "a file that is not a readable checkpoint"; keep_checkpoint="no" kept the file (a
+    true string); checkpoint_every="10" "must be >= 0 seconds"."""
+    array = tmp_path / "array.npz"
+    with open(array, "wb") as fh:
+        np.save(fh, np.arange(3))
+    with pytest.raises(ParameterError, match="holds a file that is not a readable checkpoint; it is left alone"):
+        simulate(P, checkpoint=array)
+    assert tfm.checkpoint.read_meta(array) is None
+    for kw, message in ((dict(checkpoint=True), "checkpoint: expected a file path .*got True"),
+                        (dict(checkpoint=tmp_path), f"checkpoint: {tmp_path} is a folder; give a file path"),
+                        (dict(checkpoint=tmp_path / "c.npz", keep_checkpoint="no"),
+                         "keep_checkpoint: expected True or False, got 'no'"),
+                        (dict(checkpoint=tmp_path / "c.npz", checkpoint_every="10"),
+                         "checkpoint_every: expected a number of seconds >= 0, got '10'")):
+        with pytest.raises(ParameterError, match=message):
+            simulate(P, **kw)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["array.npz"]
+
+
 def test_a_checkpoint_that_cannot_be_saved_names_its_file(tmp_path, monkeypatch):
     """On a full disk a campaign's run failed with 'OSError: [Errno 27] File too large',
     with no word that it was the checkpoint, nor which. The warning that replaced the

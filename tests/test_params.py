@@ -295,6 +295,49 @@ def test_a_loose_tree_opening_angle_is_warned_about():
         Params.from_dict(dict(base, theta=0.7))
 
 
+def test_replace_and_simulate_advise_like_from_dict():
+    """The loose-theta warning came only from simulate(**kw): simulate(p, theta=1.0) and a
+    Params(..., theta=1.0) said nothing, nor did replace(theta=0.5) with the FFT operator
+    (no effect). Checked without running: simulate refuses the bad progress argument after
+    the parameters."""
+    from tfm import simulate
+
+    base = dict(spacing=1 / 48, k_th=0.02, f_th=None, shape="paraboloid", max_indent=0.05)
+    fft = Params.from_dict(base)
+    with pytest.warns(ParameterWarning, match="theta: given but has no effect; it applies only when "
+                                              "operator='tree'") as caught:
+        fft.replace(theta=0.5)
+    assert caught[0].filename == __file__
+    for args, over in (((fft,), dict(operator="tree", theta=1.0)),
+                       ((Params(**base, operator="tree", theta=1.0),), {})):
+        with pytest.warns(ParameterWarning, match="theta: 1 is loose") as caught, \
+                pytest.raises(ParameterError, match="progress"):
+            simulate(*args, **over, progress=5)
+        assert caught[0].filename == __file__
+
+
+def test_simulate_turns_a_record_to_si_units_and_refuses_what_is_no_record():
+    """simulate(Params(...), units='si', work_of_adhesion=...) kept the paper-units default
+    f_th and failed with "not both" thresholds; a table row gave an AttributeError; a
+    mistyped keyword of simulate's own got no hint."""
+    import inspect
+
+    import pandas as pd
+
+    from tfm import simulate
+    from tfm.simulate import KEYWORDS
+
+    si = dict(units="si", youngs_modulus=1e6, poisson_ratio=0.5, work_of_adhesion=0.05, radius=1e-3,
+              spacing=3.4e-6, step=1e-8)
+    assert Params(shape="paraboloid").replace(**si) == Params.from_dict({"shape": "paraboloid", **si})
+    with pytest.raises(ParameterError, match=r"got Series \(a table row: tfm.Params.from_row\(row\)\)"):
+        simulate(pd.Series({"p_spacing": 0.1}))
+    with pytest.raises(ParameterError, match="unknown parameter 'progres' \\(did you mean 'progress'\\?\\)"):
+        simulate(progres=print)
+    assert set(KEYWORDS) == set(inspect.signature(simulate).parameters) - {"p", "overrides"}
+    assert Params.from_dict({"max_indent": " Auto "}).max_indent == "auto"
+
+
 def test_a_name_in_the_wrong_case_gets_its_hint():
     """'tre' got "did you mean 'tree'?", 'FFT' got no hint."""
     with pytest.raises(ParameterError, match=r"operator: unknown value 'FFT'.*did you mean 'fft'\?"):

@@ -227,3 +227,14 @@ def test_writing_a_result_twice_leaves_each_table_its_snapshots(tmp_path):
     assert read_metadata(a)["fields"] == fa.name and read_metadata(b)["fields"] == fb.name
     with pytest.raises(ValueError, match="must end with .parquet"):
         res.write_curve(tmp_path / "c.csv")
+
+
+def test_snapshots_at_a_path_of_the_callers_stay_there(tmp_path):
+    """write_curve moved the file given as fields_path beside the table: the caller's
+    my_fields.nc was gone. It is copied now; a fields_path that is not .nc is refused."""
+    mine = tmp_path / "my_fields.nc"
+    res = tfm.simulate(spacing=1 / 16, step=5e-3, snapshots="events", fields_path=mine, **STANDARD)
+    res.write_curve(tmp_path / "a.parquet")
+    assert mine.exists() and (tmp_path / "a.fields.nc").read_bytes() == mine.read_bytes()
+    with pytest.raises(tfm.ParameterError, match="fields_path: .*x.txt must end with .nc"):
+        tfm.simulate(spacing=1 / 16, snapshots="events", fields_path=tmp_path / "x.txt", **STANDARD)

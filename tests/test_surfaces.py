@@ -235,6 +235,30 @@ def test_a_npy_map_without_a_pixel_size_is_warned_about(tmp_path):
         Params.from_dict({**kw, "map_pixel_size": "1/32"})
 
 
+def test_a_npy_map_without_a_pixel_size_is_warned_about_on_every_path_to_a_run(tmp_path):
+    """The warning came only from Params.from_dict of a partial record: simulate of a
+    Params(...), of a record with a new spacing (another body, without a word), or of a
+    complete record with overrides said nothing. Checked without running: simulate
+    refuses the bad progress argument after the parameters, before any computation."""
+    from tfm import ParameterWarning, simulate
+
+    kw = dict(shape="height_map", height_map=_map(tmp_path), spacing=1 / 32, f_th=0.0, max_indent=1e-3,
+              step=1e-4)
+    p = Params(**kw)
+    stored = Params.from_dict(kw, advise=False).to_dict()
+    for args, over in (((p,), {}), ((Params(**kw),), {"spacing": 1 / 16}), ((stored,), {"spacing": 1 / 16}),
+                       ((), kw)):
+        with pytest.warns(ParameterWarning, match="map_pixel_size: not given") as caught, \
+                pytest.raises(ParameterError, match="progress"):
+            simulate(*args, **over, progress=5)
+        assert caught[0].filename == __file__          # points at the caller, not into tfm
+    with warnings.catch_warnings():                    # once per record, and not for a stored one
+        warnings.simplefilter("error")
+        for args in ((p,), (stored,)):
+            with pytest.raises(ParameterError, match="progress"):
+                simulate(*args, progress=5)
+
+
 def test_contact_at_a_cropped_side_of_a_height_map_is_flagged(tmp_path, capsys):
     """A map is a finite body: contact at its own edge is physical. But a grid cut short
     of the map, by extent or as the centred square of an oblong map, was never flagged:
@@ -438,6 +462,14 @@ def test_ensemble_stats_mean_and_spread_over_seeds():
     # the jittered layout's seed is a seed too: grouped by it, each group had n = 1
     jittered = pd.DataFrame(rows).rename(columns={"p_roughness_seed": "p_seed"})
     assert ensemble_stats(jittered, pd.concat(curves))["n"].tolist() == [3, 3]
+    # one column as a string: `by` was split into characters (KeyError 'p'), and `seeds`
+    # became a grouping column, every group n = 1 and every std NaN
+    one = ensemble_stats(pd.DataFrame(rows), pd.concat(curves), by="p_rms_height", seeds="p_roughness_seed")
+    pd.testing.assert_frame_equal(one, stats)
+    with pytest.raises(ValueError, match="ensemble_stats: seeds: no column 'p_roughnes_seed' in the table"):
+        ensemble_stats(pd.DataFrame(rows), pd.concat(curves), seeds=["p_roughnes_seed"])
+    with pytest.raises(ValueError, match="ensemble_stats: by: no column 'p_rms'"):
+        ensemble_stats(pd.DataFrame(rows), pd.concat(curves), by="p_rms")
 
 
 def test_rough_campaign_files_expand():

@@ -7,15 +7,18 @@ import types
 
 __version__ = "0.1.0"
 
-from .params import ParameterError, Params  # noqa: E402
+from .params import ParameterError, ParameterWarning, Params  # noqa: E402
 
-__all__ = ["Params", "ParameterError", "RunWarning", "simulate", "__version__"]
+__all__ = ["Params", "ParameterError", "ParameterWarning", "GuardError", "RunWarning", "simulate",
+           "__version__"]
 
 
 def __getattr__(name):
     # the engine (NumPy, SciPy, Numba) loads on first use, so `tfm --help` stays fast
     if name in ("simulate", "RunWarning"):
         return getattr(importlib.import_module(".simulate", __name__), name)
+    if name == "GuardError":
+        return importlib.import_module(".guards", __name__).GuardError
     # submodules as attributes after a bare `import tfm` (tfm.results.read_metadata, ...)
     if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
         return importlib.import_module(f".{name}", __name__)

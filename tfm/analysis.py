@@ -270,11 +270,23 @@ def convergent_alpha(alphas, slopes, confidence: float = CONFIDENCE) -> ZeroCros
     return ZeroCrossing(root, se, root - half, root + half, a, b, n, confidence)
 
 
+def _column_list(names, what: str, table: pd.DataFrame) -> list[str]:
+    """Column names given as one name or several, each a column of ``table``: a single
+    string was split into its characters."""
+    names = [names] if isinstance(names, str) else list(names)
+    missing = [n for n in names if n not in table.columns]
+    if missing:
+        raise ValueError(f"{what}: no column {', '.join(map(repr, missing))} in the table "
+                         f"(its parameter columns: {', '.join(c for c in table.columns if c.startswith('p_'))})")
+    return names
+
+
 def kernel_slopes(summary: pd.DataFrame, value: str = "r_pull_off_force",
                   by: tuple[str, ...] = ("p_kernel", "p_alpha")) -> pd.DataFrame:
     """One spacing slope per group of a campaign summary (default: per kernel and alpha)."""
     rows = []
-    for key, g in summary.groupby(list(by), sort=True):
+    by = _column_list(by, "kernel_slopes: by", summary)
+    for key, g in summary.groupby(by, sort=True):
         g = g[g[value] > 0]
         if g["p_spacing"].nunique() < 2:
             continue
@@ -612,11 +624,14 @@ def ensemble_stats(summary: pd.DataFrame, curves: pd.DataFrame, by=None,
     ``<m>_ci`` (half-width of the Student-t interval of the mean), and ``n`` seeds."""
     _check_confidence(confidence, "ensemble_stats")
     table = run_metrics_table(summary, curves)
-    seeds = [s for s in seeds if s in table.columns]
+    # the default seed columns are those of every kind of run; columns named by the caller
+    # must be there
+    seeds = ([s for s in seeds if s in table.columns] if seeds is SEED_COLUMNS
+             else _column_list(seeds, "ensemble_stats: seeds", table))
     if by is None:
         by = [c for c in table.columns if c.startswith("p_") and c not in seeds
               and table[c].astype(str).nunique() > 1]
-    by = list(by)
+    by = _column_list(by, "ensemble_stats: by", table)
     rows = []
     groups = table.groupby(by, sort=True, dropna=False) if by else [((), table)]
     for key, g in groups:

@@ -61,7 +61,9 @@ def why_not(p) -> str | None:
 
 def check_every(every, name: str = "checkpoint_every") -> float:
     """The interval between saves in seconds; anything but a number >= 0 is refused."""
-    if isinstance(every, bool) or not isinstance(every, (int, float)) or not every >= 0:
+    if isinstance(every, bool) or not isinstance(every, (int, float)):
+        raise ParameterError(f"{name}: expected a number of seconds >= 0, got {every!r}")
+    if not every >= 0:
         raise ParameterError(f"{name}: must be >= 0 seconds, got {every!r}")
     return float(every)
 
@@ -277,8 +279,12 @@ def read_meta(path: str | os.PathLike) -> dict | None:
     """A checkpoint's metadata (run_id, steps done, phase, elapsed, written_at), or None
     if it cannot be read."""
     try:
-        with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
+        with open(path, "rb") as fh:
+            if fh.read(2) != b"PK":        # not an .npz archive (np.load would give an array)
+                return None
+            fh.seek(0)
+            with np.load(fh, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
         meta.pop("carried", None)
         return meta
     except UNREADABLE + (AttributeError,):      # AttributeError: metadata that is not a mapping

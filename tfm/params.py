@@ -242,8 +242,10 @@ class Params:
         return tuple(f.name for f in fields(cls))
 
     @classmethod
-    def from_dict(cls, values: Mapping[str, Any], *, where: str = "") -> "Params":
-        """Build from loose input (CLI, TOML): fractions accepted, unknown keys refused."""
+    def from_dict(cls, values: Mapping[str, Any], *, where: str = "", advise: bool = True) -> "Params":
+        """Build from loose input (CLI, TOML): fractions accepted, unknown keys refused.
+        The keys given are checked by ``advise`` (not with ``advise=False``, nor for a
+        complete record: a stored one, read back)."""
         names = cls.field_names()
         prefix = f"{where}: " if where else ""
         clean: dict[str, Any] = {}
@@ -258,30 +260,8 @@ class Params:
         except ParameterError as exc:
             raise ParameterError(f"{prefix}{exc}") from None
         # a complete record (a stored one, read back) carries every default: no warnings
-        given = clean if set(clean) != set(names) else {}
-        for name in given:
-            rule = APPLIES.get(name)
-            if rule is not None and not rule.applies(params) and not rule.also(params):
-                warnings.warn(f"{prefix}{name}: given but has no effect; it applies only when {rule.when}",
-                              ParameterWarning, stacklevel=2)
-        for name, why in _moot(params):
-            if name in given and given[name] != _DEFAULTS[name]:
-                warnings.warn(f"{prefix}{name}: given but has no effect here: {why}", ParameterWarning,
-                              stacklevel=2)
-        if "theta" in given and params.operator == "tree" and params.theta > LOOSE_THETA:
-            from .tree_operator import tree_error_bound
-            warnings.warn(f"{prefix}theta: {params.theta:g} is loose: the tree's error bound is "
-                          f"{tree_error_bound(params.theta):.2g} of sum |f|/r at each target ({tree_error_bound(0.5):.2g} "
-                          f"at 0.5), and snap decisions follow it (theta 1 against the direct sum, spacing 1/48: "
-                          f"the pull-off indent 18 steps off); theta <= {LOOSE_THETA:g} kept the pull-off "
-                          "within 1e-5", ParameterWarning, stacklevel=2)
-        if "height_map" in given and "map_pixel_size" not in given and params.shape == "height_map":
-            from .surfaces import load_height_map
-            if load_height_map(params.height_map).pixel_size is None:
-                warnings.warn(f"{prefix}map_pixel_size: not given, and the map carries none (a .npy array): its pixel is "
-                              f"the spacing ({params.spacing:g}), so at another spacing it is another body, "
-                              "scaled with it; give map_pixel_size to fix its size", ParameterWarning,
-                              stacklevel=2)
+        if advise:
+            params.advise(clean if set(clean) != set(names) else {}, prefix)
         return params
 
     @classmethod
@@ -299,11 +279,55 @@ class Params:
             values[name] = value
         return cls.from_dict(values, where="table row")
 
+    def advise(self, given: Mapping[str, Any], prefix: str = "", stacklevel: int = 2) -> None:
+        """Warn (ParameterWarning) about the parameters in ``given`` (name -> value as
+        given) that have no effect on this record, a loose tree, and a map without a pixel
+        size. Once per record: Params.from_dict and replace advise on what they were given,
+        and tfm.simulate advises a record built otherwise on its fields off their defaults.
+        ``stacklevel`` as warnings.warn's, seen from the caller of advise."""
+        object.__setattr__(self, "_advised", True)      # not a field: not compared, hashed or stored
+        params = self
+        stacklevel += 1
+        for name in given:
+            rule = APPLIES.get(name)
+            if rule is not None and not rule.applies(params) and not rule.also(params):
+                warnings.warn(f"{prefix}{name}: given but has no effect; it applies only when {rule.when}",
+                              ParameterWarning, stacklevel=stacklevel)
+        for name, why in _moot(params):
+            if name in given and given[name] != _DEFAULTS[name]:
+                warnings.warn(f"{prefix}{name}: given but has no effect here: {why}", ParameterWarning,
+                              stacklevel=stacklevel)
+        if "theta" in given and params.operator == "tree" and params.theta > LOOSE_THETA:
+            from .tree_operator import tree_error_bound
+            warnings.warn(f"{prefix}theta: {params.theta:g} is loose: the tree's error bound is "
+                          f"{tree_error_bound(params.theta):.2g} of sum |f|/r at each target ({tree_error_bound(0.5):.2g} "
+                          f"at 0.5), and snap decisions follow it (theta 1 against the direct sum, spacing 1/48: "
+                          f"the pull-off indent 18 steps off); theta <= {LOOSE_THETA:g} kept the pull-off "
+                          "within 1e-5", ParameterWarning, stacklevel=stacklevel)
+        # a map without a pixel size is drawn at the spacing: a new map, or a new spacing,
+        # makes another body
+        if (("height_map" in given or "spacing" in given) and "map_pixel_size" not in given
+                and params.shape == "height_map" and params.map_pixel_size is None):
+            from .surfaces import load_height_map
+            if load_height_map(params.height_map).pixel_size is None:
+                warnings.warn(f"{prefix}map_pixel_size: not given, and the map carries none (a .npy array): its pixel is "
+                              f"the spacing ({params.spacing:g}), so at another spacing it is another body, "
+                              "scaled with it; give map_pixel_size to fix its size", ParameterWarning,
+                              stacklevel=stacklevel)
+
     def replace(self, **changes: Any) -> "Params":
         """A copy with ``changes``, read like from_dict (fractions, "none"); one of
-        k_th and f_th given clears the other."""
+        k_th and f_th given clears the other, and so does units = "si" the paper-units f_th.
+        The changes are advised on (``advise``) if this record was."""
+        new = self._replaced(changes)
+        if getattr(self, "_advised", False):
+            new.advise({key: getattr(new, key) for key in changes})
+        return new
+
+    def _replaced(self, changes: Mapping[str, Any]) -> "Params":
+        """replace without the advice."""
         changes = {key: parse_param(key, value) for key, value in changes.items()}
-        if changes.get("k_th") is not None and "f_th" not in changes:
+        if (changes.get("k_th") is not None or changes.get("units") == "si") and "f_th" not in changes:
             changes["f_th"] = None
         if changes.get("f_th") is not None and "k_th" not in changes:
             changes["k_th"] = None
@@ -486,8 +510,8 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
             return None
         kind = _KINDS[key]
         if key == "max_indent":
-            if value == "auto":
-                return value
+            if isinstance(value, str) and value.strip().lower() == "auto":
+                return "auto"
             try:
                 return parse_number(value, key)
             except ParameterError:

@@ -111,7 +111,9 @@ class RunResult:
         self.summary = summary
         self.provenance = {} if provenance is None else provenance
         self.fields_path = fields_path      # the field snapshots (NetCDF4), if any
-        self._fields_placed = False         # beside a written table
+        # the file at fields_path stays where it is (beside an earlier table, or where the
+        # caller of simulate asked for it): write_curve copies it instead of moving it
+        self._fields_stay = False
 
     @property
     def curve(self) -> pd.DataFrame:
@@ -132,7 +134,7 @@ class RunResult:
     def __setstate__(self, state: dict) -> None:
         if "curve" in state:                # pickled when RunResult was a dataclass
             state["_curve"] = state.pop("curve")
-        state.setdefault("_fields_placed", False)
+        state.setdefault("_fields_stay", state.pop("_fields_placed", False))
         self.__dict__.update(state)
 
     def __repr__(self) -> str:
@@ -146,7 +148,8 @@ class RunResult:
     def write_curve(self, path: str | os.PathLike) -> Path:
         """Write the curve table (``.parquet``); field snapshots, if any, move beside it as
         ``<stem>.fields.nc`` (copied, if an earlier write_curve placed them beside another
-        table) and the table's metadata names them (``fields``)."""
+        table or simulate wrote them to a path of the caller's) and the table's metadata
+        names them (``fields``)."""
         from .units import unit_labels
 
         path = Path(path)
@@ -159,13 +162,13 @@ class RunResult:
                 # through a temporary name in the destination folder: a kill leaves no half file
                 dest.parent.mkdir(parents=True, exist_ok=True)
                 tmp = dest.with_name(f".{dest.name}.{os.getpid()}.tmp")
-                if self._fields_placed:      # the earlier table keeps its own
+                if self._fields_stay:
                     shutil.copyfile(self.fields_path, tmp)
                 else:
                     shutil.move(str(self.fields_path), tmp)
                 os.replace(tmp, dest)
                 self.fields_path = dest
-            self._fields_placed = True
+            self._fields_stay = True         # the table keeps its own
             extra["fields"] = dest.name
         written = write_table(self._curve, path, self.params, self.provenance, self.summary, extra=extra)
         if self.fields_path is None:

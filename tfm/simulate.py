@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import os
 import warnings
 from collections.abc import Mapping
@@ -11,7 +12,7 @@ from .checkpoint import CHECKPOINT_EVERY, Checkpoint, StopRequest, why_not
 from .geometry import heights, make_layout
 from .guards import check
 from .operators import check_positive_definite, grid_symbol, kernel_spec, make_operator, make_preconditioner
-from .params import ParameterError, Params
+from .params import _DEFAULTS, ParameterError, Params
 from .results import RunResult, curve_columns, provenance, summarize
 from .solver import Problem
 from .threshold import threshold_forces
@@ -41,6 +42,11 @@ def build_problem(p: Params) -> tuple[Problem, object]:
     return prob, layout
 
 
+# simulate's keywords besides the parameters
+KEYWORDS = ("progress", "fields_path", "checkpoint", "checkpoint_every", "keep_checkpoint",
+            "replace_checkpoint")
+
+
 def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkpoint=None,
              checkpoint_every: float = CHECKPOINT_EVERY, keep_checkpoint: bool = False,
              replace_checkpoint: bool = False,
@@ -51,8 +57,9 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     ``progress(record)`` is called after every step with its tfm.solver.StepRecord (step,
     phase, d, force, contact_area, n_contact, ...; the run's units: newtons and metres in
     an SI run; force = -sum(F), compressive positive, as in the curve table). With ``p.snapshots`` other than
-    "none" the field snapshots stream to ``fields_path`` (NetCDF4, tfm.snapshots); without
-    a path they go to a temporary file that ``RunResult.write_curve`` moves beside the curve.
+    "none" the field snapshots stream to ``fields_path`` (NetCDF4, ``.nc``, tfm.snapshots),
+    which ``RunResult.write_curve`` copies beside the curve; without a path they go to a
+    temporary file that it moves there.
 
     ``checkpoint`` (a file path, displacement control without snapshots): the run's state
     is saved there every ``checkpoint_every`` seconds, a saved state of this run is
@@ -65,26 +72,49 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     version of tfm is always set aside with a warning (it cannot promise the same numbers)."""
     from . import protocol
 
+    unknown = [key for key in overrides if key not in Params.field_names()]
+    if unknown:                # a mistyped keyword of simulate's own, too
+        close = difflib.get_close_matches(unknown[0], Params.field_names() + KEYWORDS, n=1)
+        raise ParameterError(f"simulate: unknown parameter {unknown[0]!r}"
+                             + (f" (did you mean {close[0]!r}?)" if close else ""))
+    # the parameters given, to warn about those that have no effect (Params.advise)
     if p is None:
-        p = Params.from_dict(overrides) if overrides else Params()
+        p = Params.from_dict(overrides, advise=False) if overrides else Params()
+        given = overrides
     elif isinstance(p, Mapping):
         merged = {**p, **overrides}
         # as Params.replace: a threshold given as an override clears the other one
-        for given, other in (("k_th", "f_th"), ("f_th", "k_th")):
-            if overrides.get(given) is not None and other not in overrides:
+        for name, other in (("k_th", "f_th"), ("f_th", "k_th")):
+            if overrides.get(name) is not None and other not in overrides:
                 merged.pop(other, None)
-        p = Params.from_dict(merged)
-    elif isinstance(p, (str, bytes, int, float, list, tuple, os.PathLike)):
-        raise ParameterError(f"simulate: expected a tfm.Params or a dict of parameters, got {type(p).__name__}")
-    elif overrides:
-        p = p.replace(**overrides)
+        complete = set(p) >= set(Params.field_names())
+        p = Params.from_dict(merged, advise=False)
+        given = overrides if complete else merged      # a stored record: only the changes
+    elif isinstance(p, Params):
+        # a record built by Params(...) was never advised: its fields off their defaults
+        given = overrides if getattr(p, "_advised", False) else {
+            **{k: v for k, v in p.to_dict().items() if v != _DEFAULTS[k]}, **overrides}
+        p = p._replaced(overrides) if overrides else p
+    else:
+        hint = " (a table row: tfm.Params.from_row(row))" if hasattr(p, "index") else ""
+        raise ParameterError(f"simulate: expected a tfm.Params or a dict of parameters, got "
+                             f"{type(p).__name__}{hint}")
+    if given:
+        p.advise({k: getattr(p, k) for k in given}, stacklevel=2)
     if progress is not None and not callable(progress):
         raise ParameterError(f"progress: expected a function of one step record, got {progress!r}")
     # arguments that would be silently ignored are refused
     if fields_path is not None and p.snapshots == "none":
         raise ParameterError("fields_path: applies only with snapshots = 'events' or K (this run stores none)")
+    if fields_path is not None and Path(fields_path).suffix.lower() != ".nc":
+        raise ParameterError(f"fields_path: {fields_path} must end with .nc (the snapshots are NetCDF4)")
     if fields_path is not None and not Path(fields_path).expanduser().resolve().parent.is_dir():
         raise ParameterError(f"fields_path: the folder of {fields_path} does not exist")
+    if checkpoint is not None and not isinstance(checkpoint, (str, os.PathLike)):
+        raise ParameterError(f"checkpoint: expected a file path (such as 'run.npz'), got {checkpoint!r}")
+    for name, value in (("keep_checkpoint", keep_checkpoint), ("replace_checkpoint", replace_checkpoint)):
+        if not isinstance(value, bool):
+            raise ParameterError(f"{name}: expected True or False, got {value!r}")
     if checkpoint is None:
         for name, value, default in (("checkpoint_every", checkpoint_every, CHECKPOINT_EVERY),
                                      ("keep_checkpoint", keep_checkpoint, False),
@@ -169,6 +199,7 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     res = RunResult(p, curve, summary, prov)
     if writer is not None:
         res.fields_path = writer.path
+        res._fields_stay = not own_path          # the caller's file: write_curve copies it
     return res
 
 
@@ -179,6 +210,9 @@ def _checkpoint(p: Params, path, every: float, replace: bool) -> Checkpoint:
     if reason:
         raise ParameterError(f"checkpoint: {reason}")
     ckpt = Checkpoint(path, p.run_id, every)
+    if ckpt.path.is_dir():
+        raise ParameterError(f"checkpoint: {ckpt.path} is a folder; give a file path, such as "
+                             f"{ckpt.path / 'run.npz'}")
     what = None if replace else ckpt.foreign()
     if what is not None:
         raise ParameterError(f"checkpoint: {ckpt.path} holds {what}; it is left alone: delete it, give "
