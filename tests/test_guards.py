@@ -399,8 +399,18 @@ def test_a_long_direct_run_is_announced_with_an_estimate(tmp_path, monkeypatch, 
     assert guards.direct_cost_note(Params.from_dict(dict(std, spacing="1/512", operator="fft"))) is None
     note = guards.direct_cost_note(Params.from_dict(dict(std, spacing="1/512")))
     assert "with 94,249 springs expect roughly 3 hours" in note and "operator='fft'" in note
+    # the time follows the contact, not only the grid: a 1/128 run with extent 1 (66,049
+    # springs) was put at an hour and took 67 s on one thread
+    wide = guards.direct_cost_estimate(Params.from_dict(dict(std, spacing="1/128", extent=1.0)))
+    assert 60 < wide < guards.COST_NOTE_SECONDS
+    # a run of years is refused, with its override (a 1/2048 run started and could not be stopped)
+    huge = dict(std, spacing="1/2048", max_indent=0.5, step=1e-2)
+    with pytest.raises(guards.GuardError, match=r"operator: the direct sum over .* springs would take roughly "
+                                                r"\d+ days .*To run it anyway, allow='cost'"):
+        guards.check(Params.from_dict(huge), memory=True)
+    assert guards.check(Params.from_dict(huge), memory=False) == []      # campaign files: this machine's check
     # the command line says it before the run (a small run made to look long)
-    monkeypatch.setattr(guards, "DIRECT_REFERENCE", (100, 1000.0))
+    monkeypatch.setattr(guards, "DIRECT_REFERENCE_SECONDS", 1e10)
     assert main(["run", "--spacing", "1/16", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.05",
                  "--step", "2.5e-3", "--operator", "direct", "-q", "--no-plot", "-o", str(tmp_path / "d.parquet")]) == 0
     assert "tfm: note: operator='direct' sums every pair of springs" in capsys.readouterr().err

@@ -28,13 +28,16 @@ alpha = 0.75, max_indent = 0.05; reference 3.19e-3 at spacing 1/256):
   ``python -m bench.guards tol``, 2026-11-25). Earlier, with step 1e-3 at 1/64 only, 1e-4
   had looked safe (3e-6), and 1e-4 was the limit until then.
 - ``memory``: the estimate below against the memory the machine has available now.
+- ``cost``: a direct-sum run whose estimated time (direct_cost_estimate, scaled from one
+  measured curve) exceeds a week; a 1/2048 run was put at 80 years and started anyway,
+  and a step of it does not end when a stop signal comes.
 """
 from __future__ import annotations
 
 import math
 
 from .config import FIELD_BOX_FRACTIONS
-from .params import ParameterError, Params
+from .params import LOOSE_THETA, ParameterError, Params
 
 MIN_SPRINGS_ACROSS_RADIUS = 2.0
 MIN_LOADING_STEPS = 10
@@ -53,6 +56,7 @@ GUARDS = {
     "step": "step: fewer than 10 loading steps (step > max_indent / 10)",
     "tol": "tol: looser than 1e-6, so snap and entry decisions depend on the solver error",
     "memory": "spacing/extent: the estimated peak memory exceeds the memory available",
+    "cost": "operator: a direct-sum run estimated to take more than a week",
 }
 
 
@@ -256,8 +260,13 @@ def _status_bytes(key: str) -> float:
 # shrinks, about N^2.5 in all. Measured on the standard curve (paraboloid R = 1, K_th 0.02,
 # max_indent 0.05, step 2.5e-4) at spacing 1/256, 25,281 springs: 338 s on the 2-core VM
 # with 2 threads (2026-11-25; 1/128 took 8.5-25 s, 1/64 0.3-2.4 s on that noisy machine).
-DIRECT_REFERENCE = (25281, 338.0)
-COST_NOTE_SECONDS = 300.0
+# The direct sum's time, scaled from one measured curve: the standard curve at spacing
+# 1/256 (25,281 springs), 338 s on the 2-core VM with 2 threads (2026-11-24).
+DIRECT_REFERENCE = dict(spacing=1 / 256, k_th=0.02, f_th=None, shape="paraboloid", max_indent=0.05,
+                        step=2.5e-4, operator="direct")
+DIRECT_REFERENCE_SECONDS = 338.0
+COST_NOTE_SECONDS = 300.0           # a note above five minutes
+COST_GUARD_SECONDS = 7 * 86400.0    # refused above a week (allow='cost')
 
 
 def _duration(seconds: float) -> str:
@@ -268,20 +277,41 @@ def _duration(seconds: float) -> str:
     return f"{seconds / 86400:.0f} days"
 
 
+def _direct_work(p) -> float:
+    """What a direct-sum run's time grows with: its loading steps times (springs x springs
+    in contact at maximum load)^1.25. Each CG iteration sums over the contact, each round's
+    field over the grid times the contact, and the iterations grow as the contact refines:
+    at a fixed geometry that is N^2.5, as measured from 1/64 to 1/256. The grid alone
+    (N^2.5 whatever the contact) put a 1/128 run with extent 1 at an hour; it took a minute."""
+    n = n_springs(p)
+    in_contact = min(n, max(1.0, math.pi * (contact_radius_estimate(p) / p.spacing) ** 2))
+    return p.delta_max / p.step * (n * in_contact) ** 1.25
+
+
+def direct_cost_estimate(p) -> float | None:
+    """Rough wall time of a direct-sum run in seconds (None for other operators and the
+    local kernel, whose sum is a diagonal), scaled from DIRECT_REFERENCE."""
+    if p.operator != "direct" or p.kernel == "local":
+        return None
+    return DIRECT_REFERENCE_SECONDS * _direct_work(p) / _direct_work(Params(**DIRECT_REFERENCE))
+
+
+def _faster(p) -> str:
+    return ("operator='fft' gives the same numbers (to 1e-12)" if p.layout == "square"
+            else "operator='tree' is")
+
+
 def direct_cost_note(p) -> str | None:
     """A note before a direct-sum run that would take more than a few minutes (a 1/512 run
     started without a word and would have taken hours), or None."""
-    if p.operator != "direct" or p.kernel == "local":
+    estimate = direct_cost_estimate(p)
+    if estimate is None or estimate < COST_NOTE_SECONDS:
         return None
-    n, seconds = DIRECT_REFERENCE
-    estimate = seconds * (n_springs(p) / n) ** 2.5
-    if estimate < COST_NOTE_SECONDS:
-        return None
-    faster = "operator='fft' gives the same numbers (to 1e-12)" if p.layout == "square" else "operator='tree' is"
+    ref = Params(**DIRECT_REFERENCE)
     return (f"operator='direct' sums every pair of springs: with {n_springs(p):,} springs expect roughly "
-            f"{_duration(estimate)} on two cores (the standard curve at spacing 1/256, {n:,} springs, took "
-            f"{seconds / 60:.1f} minutes on a 2-core VM, and the cost grows about as N^2.5); {faster} "
-            "far faster")
+            f"{_duration(estimate)} on two cores (the standard curve at spacing 1/256, {n_springs(ref):,} "
+            f"springs, took {DIRECT_REFERENCE_SECONDS / 60:.1f} minutes on a 2-core VM; the time grows about as "
+            f"loading steps x (springs x springs in contact)^1.25); {_faster(p)} far faster")
 
 
 def contact_reached_note(p, max_n_contact: int) -> str | None:
@@ -363,6 +393,17 @@ def check(p, memory: bool = True) -> list[str]:
             _guard(notes, allowed, "memory", f"spacing/extent: the run needs about {need / 2**30:.1f} GiB "
                               f"({n_springs(p):,} springs, operator {p.operator}) but "
                               f"{have / 2**30:.1f} GiB is available. Coarsen the spacing or shrink extent")
+        took = direct_cost_estimate(p)
+        if took is not None and took > COST_GUARD_SECONDS:
+            _guard(notes, allowed, "cost", f"operator: the direct sum over {n_springs(p):,} springs would take "
+                            f"roughly {_duration(took)} (scaled from the standard curve at spacing 1/256, "
+                            f"{DIRECT_REFERENCE_SECONDS / 60:.1f} minutes on a 2-core VM); {_faster(p)} far faster")
+    if p.operator == "tree" and p.kernel == "boussinesq" and p.theta > LOOSE_THETA:
+        from .tree_operator import tree_error_bound
+        notes.append(f"theta: {p.theta:g} is loose: the tree's error bound is {tree_error_bound(p.theta):.2g} of "
+                     f"sum |f|/r at each target ({tree_error_bound(0.5):.2g} at 0.5), and snap decisions follow "
+                     "it (theta 1 against the direct sum, spacing 1/48: the pull-off indent 18 steps off); "
+                     f"theta <= {LOOSE_THETA:g} kept the pull-off within 1e-5")
     slope = surface_rms_slope(p)
     if slope > MAX_RMS_SLOPE:
         is_map = p.shape == "height_map"

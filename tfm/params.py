@@ -281,8 +281,8 @@ class Params:
 
     def advise(self, given: Mapping[str, Any], prefix: str = "", stacklevel: int = 2) -> None:
         """Warn (ParameterWarning) about the parameters in ``given`` (name -> value as
-        given) that have no effect on this record, a loose tree, and a map without a pixel
-        size. Once per record: Params.from_dict and replace advise on what they were given,
+        given) that have no effect on this record, and a map without a pixel size (a loose
+        tree is a note of the run: tfm.guards.check). Once per record: Params.from_dict and replace advise on what they were given,
         and tfm.simulate advises a record built otherwise on its fields off their defaults.
         ``stacklevel`` as warnings.warn's, seen from the caller of advise."""
         object.__setattr__(self, "_advised", True)      # not a field: not compared, hashed or stored
@@ -297,13 +297,6 @@ class Params:
             if name in given and given[name] != _DEFAULTS[name]:
                 warnings.warn(f"{prefix}{name}: given but has no effect here: {why}", ParameterWarning,
                               stacklevel=stacklevel)
-        if "theta" in given and params.operator == "tree" and params.theta > LOOSE_THETA:
-            from .tree_operator import tree_error_bound
-            warnings.warn(f"{prefix}theta: {params.theta:g} is loose: the tree's error bound is "
-                          f"{tree_error_bound(params.theta):.2g} of sum |f|/r at each target ({tree_error_bound(0.5):.2g} "
-                          f"at 0.5), and snap decisions follow it (theta 1 against the direct sum, spacing 1/48: "
-                          f"the pull-off indent 18 steps off); theta <= {LOOSE_THETA:g} kept the pull-off "
-                          "within 1e-5", ParameterWarning, stacklevel=stacklevel)
         # a map without a pixel size is drawn at the spacing: a new map, or a new spacing,
         # makes another body
         if (("height_map" in given or "spacing" in given) and "map_pixel_size" not in given
