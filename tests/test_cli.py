@@ -152,7 +152,9 @@ def test_overwriting_a_table_removes_its_old_snapshots(tmp_path, capsys):
     out.unlink()
     fields.write_bytes(b"an orphan")
     assert main(["run", *SMALL, "-o", str(out), "--no-plot"]) == 2
-    assert "snapshots: " in capsys.readouterr().err and fields.read_bytes() == b"an orphan"
+    # a run without snapshots was told the file "exists; pass --overwrite to replace it"
+    assert (f"snapshots: {fields} exists, the field snapshots of another run at this path; this run stores none "
+            "and would remove them") in capsys.readouterr().err and fields.read_bytes() == b"an orphan"
 
 
 def test_default_output_is_named_by_run_id_so_runs_do_not_clobber(tmp_path, monkeypatch, capsys):
@@ -781,3 +783,24 @@ def test_a_run_without_checkpoints_does_not_bury_another_runs_saved_state(tmp_pa
         assert ckpt.read_bytes() == saved and not out.exists()
     assert main([*base, "--no-checkpoints", "--overwrite"]) == 0
     assert not ckpt.exists() and out.exists()
+
+
+def test_the_header_gives_the_units_of_an_si_run_and_the_trees_angle(tmp_path, capsys, monkeypatch):
+    """An SI run's header printed spacing=1e-05 F_th=1.14e-05 R=0.001 without m or N, and a
+    tree run's header no theta (the summary carries neither)."""
+    from tfm.plots import spacing_text
+
+    class Announced(BaseException):
+        pass
+
+    def stop(p):
+        raise Announced
+    monkeypatch.setattr(importlib.import_module("tfm.simulate"), "build_problem", stop)
+    for args in ([a for a in SMALL_SI if a != "-q"], [*SMALL[:-1], "--operator", "tree", "--theta", "0.6"]):
+        with pytest.raises(Announced):
+            main(["run", *args, "--no-plot", "-o", str(tmp_path / "c.parquet")])
+    si, tree = [line for line in capsys.readouterr().err.splitlines() if line.startswith("tfm run ")]
+    assert re.search(r"spacing=\S+ m F_th=\S+ N R=0.001 m .* max_indent=\S+ m \(", si), si
+    assert "operator=tree theta=0.6 " in tree
+    # and an SI spacing is no fraction in a caption: 1e-5 m was "1/100000 m"
+    assert spacing_text(1e-5) == "$10^{-5}$" and spacing_text(1 / 128) == "1/128"

@@ -66,7 +66,7 @@ PARAM_HELP = {
     "poisson_ratio": "units=si: Poisson ratio nu in (-1, 0.5]",
     "work_of_adhesion": "units=si: gamma (J/m^2); K_th from the paper's last equation",
     "k_th_coefficient": "units=si: c in F_max = c K_th^2 R: a number, paper (7.6), jkr (3 pi^2/4) or limit (the measured continuum limit for the self term; stored as its number)",
-    "allow": "guards to override, comma-separated: coarse, step, tol, memory (docs/physics.md)",
+    "allow": "guards to override, comma-separated: coarse, step, tol, memory, cost (docs/physics.md)",
 }
 
 
@@ -149,6 +149,10 @@ def _plan_outputs(args, p: Params) -> tuple[Path, Path | None]:
     fields = fields_path_for(out)
     # the field snapshots stream beside the table; a run without them removes those of the
     # table it replaces (write_curve)
+    if p.snapshots == "none" and fields.exists() and not args.overwrite:
+        # not this run's output: a table's snapshots that would go stale beside this table
+        raise OutputError(f"snapshots: {fields} exists, the field snapshots of another run at this path; this run "
+                          "stores none and would remove them: pass --overwrite, or give another -o")
     check_output(fields, "snapshots", (".nc",), args.overwrite, create=False)
     if p.snapshots == "none" and fields.exists() and not args.quiet:
         print(f"tfm: note: --overwrite: {fields}, the snapshots of the table being replaced, will be removed",
@@ -228,11 +232,14 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
     from .simulate import RunWarning, simulate
 
     if not args.quiet:
-        body = f"map={Path(p.height_map).name}" if p.shape == "height_map" else f"R={p.radius:g}"
+        from .units import unit_suffixes
+        m, N = unit_suffixes(p)
+        body = f"map={Path(p.height_map).name}" if p.shape == "height_map" else f"R={p.radius:g}{m}"
         n_load = n_loading_steps(p)
-        print(f"tfm run {p.run_id}: spacing={p.spacing:.6g} F_th={p.threshold_force:.4g} "
-              f"{body} shape={p.shape} kernel={p.kernel} operator={p.operator} "
-              f"max_indent={p.delta_max:.4g} ({n_load} loading step{'' if n_load == 1 else 's'}), "
+        theta = f" theta={p.theta:g}" if p.operator == "tree" and p.kernel == "boussinesq" else ""
+        print(f"tfm run {p.run_id}: spacing={p.spacing:.6g}{m} F_th={p.threshold_force:.4g}{N} "
+              f"{body} shape={p.shape} kernel={p.kernel} operator={p.operator}{theta} "
+              f"max_indent={p.delta_max:.4g}{m} ({n_load} loading step{'' if n_load == 1 else 's'}), "
               f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
         if p.shape == "height_map" and p.extent is None:
             from .surfaces import map_unused_note

@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator, ScalarFormatter
 
 from . import theory
-from .units import force_scale
+from .units import force_scale, unit_suffixes
 
 PHASE_COLOURS = {"load": "tab:blue", "unload": "tab:red"}
 SPACING_COLOURS = ("tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink")
@@ -28,11 +28,6 @@ DPI = 200
 STYLE = {"font.size": 8, "axes.labelsize": 8, "axes.titlesize": 8, "legend.fontsize": 7,
          "xtick.labelsize": 7, "ytick.labelsize": 7, "lines.linewidth": 1.0, "legend.frameon": False,
          "axes.formatter.use_mathtext": True}
-
-
-def unit_suffixes(p) -> tuple[str, str]:
-    """(length, force) units after a number: " m", " N" for an SI run, none in paper units."""
-    return (" m", " N") if p is not None and p.units == "si" else ("", "")
 
 
 def axis_label(name: str, kind: str, p=None, note: str = "") -> str:
@@ -132,9 +127,13 @@ def number(x, digits=3) -> str:
 
 
 def spacing_text(spacing) -> str:
-    """1/128 rather than 0.007812."""
+    """1/128 rather than 0.007812; a power of ten as one (an SI spacing of 1e-5 m was
+    1/100000)."""
     inv = 1.0 / spacing
-    return f"1/{inv:.0f}" if abs(inv - round(inv)) < 1e-6 * inv else number(spacing)
+    whole = abs(inv - round(inv)) < 1e-6 * inv
+    if whole and round(inv) >= 10 and str(round(inv)).rstrip("0") == "1":
+        return number(spacing)
+    return f"1/{inv:.0f}" if whole else number(spacing)
 
 
 def _spacing_label(spacing):

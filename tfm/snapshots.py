@@ -182,7 +182,7 @@ class SnapshotWriter:
         chunks = (1,) + tuple(f.dimensions[s].size for s in space)
         comp = dict(compression="gzip", compression_opts=4, shuffle=True, chunks=chunks)
         self._var("F", ("step",) + space, None, "spring force (tension > 0)", F_, dtype="f8", **comp)
-        self._var("u", ("step",) + space, None, "spring displacement u = C F (= d - x0 in contact)", L,
+        self._var("u", ("step",) + space, None, "spring displacement u = C F (= d - x0 in contact, to the solver tolerance; to the tree's error with operator tree)", L,
                   dtype="f8", **comp)
         v = self._var("state", ("step",) + space, None, "contact state", "1", dtype="i1", **comp)
         v.attrs["flag_values"] = np.array([STATE_NEVER, STATE_CONTACT, STATE_RELEASED], dtype=np.int8)

@@ -183,6 +183,11 @@ def to_si_summary(summary: dict, p) -> dict:
     return _forces_to_si(summary, p)
 
 
+def unit_suffixes(p) -> tuple[str, str]:
+    """(length, force) units after a number: " m", " N" for an SI run, none in paper units."""
+    return (" m", " N") if p is not None and p.units == "si" else ("", "")
+
+
 def unit_labels(p) -> dict:
     """What the run's curve and summary are measured in (for the tables' metadata)."""
     return {"system": p.units, **COLUMN_UNITS[p.units]}
