@@ -1335,3 +1335,30 @@ def test_a_damaged_run_file_is_reported_then_computed_again(tmp_path, capsys):
     assert "warning: campaign damaged: 1 run file" in capsys.readouterr().err
     assert store.status(spec).done == spec.run_ids
     assert_bitwise_equal(pd.read_parquet(store.run_path(rid)), curve)
+
+
+def test_status_of_a_limit_campaign_counts_its_kept_points(tmp_path, monkeypatch, capsys):
+    """status said "60 pending" for limit_sphere, whose 60 runs all have a kept point in
+    results/limit/points.csv (the runs are too large to keep): a user would have computed
+    about ten hours again with `tfm campaign run` instead of `make limit`."""
+    import csv
+
+    monkeypatch.chdir(REPO)
+    spec = load_spec(REPO / "campaigns" / "limit_sphere.toml")
+    with open(REPO / "results" / "limit" / "points.csv", newline="") as fh:
+        kept = {row["run_id"] for row in csv.DictReader(fh)} & set(spec.run_ids)
+    assert kept
+    assert tfm_main(["campaign", "status", "campaigns/limit_sphere.toml", "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert (f"{len(kept)} pending runs have a kept point in results/limit/points.csv: `tfm limit` (make limit) "
+            "fits those and computes only the rest") in out
+    assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path)]) == 0
+    assert "kept point" not in capsys.readouterr().out
+
+
+def test_runs_left_out_are_named_as_the_caller_says(tmp_path, capsys):
+    """tfm limit leaves out the runs that have a kept point: "0 of 60 runs already done,
+    60 not selected" read as if nothing had been computed."""
+    spec = _tiny("kept")
+    run_campaign(spec, results_dir=tmp_path, only=[], left_out_as="with a kept point")
+    assert "nothing to run, 0 of 2 runs already done, 2 with a kept point" in capsys.readouterr().err

@@ -46,20 +46,27 @@ def register(subparsers) -> None:
     run.set_defaults(func=cmd_run)
 
     status = sub.add_parser("status", help="how many runs are done, pending and failed "
-                                           "(exit status 1 if any failed)")
-    status.add_argument("file")
+                                           "(exit status 1 if any failed)",
+                            description="How many runs of a campaign are done (and flagged), pending and "
+                                        "failed, and what else is found in its folder. Exit status 1 if a "
+                                        "run failed; 2: bad input.")
+    status.add_argument("file", help="campaign file, e.g. campaigns/smoke.toml")
     _max_runs_flag(status)
-    status.add_argument("--results-dir", default=RESULTS_DIR)
+    status.add_argument("--results-dir", default=RESULTS_DIR, help="parent of results/<name>/ (default results; another one must exist)")
     status.add_argument("-v", "--verbose", action="store_true", help="one line per run")
     status.set_defaults(func=cmd_status)
 
-    lst = sub.add_parser("list", help="the campaign files and their progress")
+    lst = sub.add_parser("list", help="the campaign files and their progress",
+                         description="One line per campaign file: its runs, how many are done and failed, "
+                                     "and its description. Exit status 2 if a file is invalid.")
     lst.add_argument("--dir", default="campaigns", help="folder of campaign files (default campaigns)")
-    lst.add_argument("--results-dir", default=RESULTS_DIR)
+    lst.add_argument("--results-dir", default=RESULTS_DIR, help="parent of results/<name>/ (default results; another one must exist)")
     lst.set_defaults(func=cmd_list)
 
-    expand = sub.add_parser("expand", help="print the runs a campaign file expands to")
-    expand.add_argument("file")
+    expand = sub.add_parser("expand", help="print the runs a campaign file expands to",
+                            description="Print the runs a campaign file expands to, in order: index, run id "
+                                        "and the swept values (--json: every parameter). Nothing is run.")
+    expand.add_argument("file", help="campaign file, e.g. campaigns/smoke.toml")
     _max_runs_flag(expand)
     expand.add_argument("--json", action="store_true", help="one JSON object per run, all parameters")
     expand.set_defaults(func=cmd_expand)
@@ -132,6 +139,13 @@ def cmd_status(args) -> int:
           + f"  [{store.root}]")
     if not store.root.is_dir():
         print(f"  nothing stored yet: {store.root} does not exist (not run with this --results-dir)")
+    from ..paper import kept_limit_points
+    points, kept = kept_limit_points(spec.name)
+    kept &= set(st.pending)
+    if kept:
+        # the limit study keeps a point per run, not the run: this campaign would compute them again
+        print(f"  {len(kept)} pending runs have a kept point in {points}: `tfm limit` (make limit) fits those "
+              "and computes only the rest; `tfm campaign run` would compute them again")
     for note in (store.damaged_note(st), store.extra_note(st)):
         if note:
             print(f"  {note}")

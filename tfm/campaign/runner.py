@@ -108,7 +108,7 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
 def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = False,
                  results_dir: str | os.PathLike = "results", retry_failed: bool = True,
                  rerun_stale: bool = False, only=None,
-                 checkpoint_every: float | None = CHECKPOINT_EVERY) -> Path:
+                 checkpoint_every: float | None = CHECKPOINT_EVERY, left_out_as: str = "not selected") -> Path:
     """Run every run of a campaign that is not stored yet; return ``results_dir/<name>``.
 
     ``jobs`` > 1 uses a local process pool; ``scheduler`` (an address such as
@@ -117,7 +117,8 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
     Failed runs are tried again unless ``retry_failed=False``. Runs stored by other
     tfm source code (prov_code_hash) are kept (with a warning) unless ``rerun_stale=True``:
     the run id hashes the parameters, not the code. ``only`` (run ids or runs, e.g. from select_runs) limits
-    what is computed now; the campaign tables still cover every stored run.
+    what is computed now (the closing line counts the others as ``left_out_as``); the
+    campaign tables still cover every stored run.
 
     On this machine (serial or process pool) a displacement-controlled run without field
     snapshots saves its state every ``checkpoint_every`` seconds in ``checkpoints/``
@@ -149,14 +150,14 @@ def run_campaign(spec_or_path, jobs: int = 1, scheduler=None, quiet: bool = Fals
     client = _dask_client(scheduler) if scheduler is not None else None
     try:
         return _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_stale, only,
-                            checkpoint_every)
+                            checkpoint_every, left_out_as)
     finally:
         if client is not None and client is not scheduler:
             client.close()
 
 
 def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_stale, only,
-                 checkpoint_every) -> Path:
+                 checkpoint_every, left_out_as) -> Path:
     """run_campaign from the claim of its folder on (``client``: a connected Dask client)."""
     store = CampaignStore.for_spec(spec, results_dir)
     with store.lock():
@@ -177,10 +178,11 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
         damaged = store.damaged_note(status)
         if damaged:                        # even with quiet: stored data were lost
             print(f"warning: campaign {spec.name}: {damaged}", file=sys.stderr)
-        left_out = 0
+        left_out = ""                       # pending runs outside ``only``, said as left_out_as
         if only is not None:                 # run ids, or the Run records select_runs returns
             chosen = {getattr(r, "run_id", r) for r in only}
-            left_out = len(redo - chosen)
+            n_out = len(redo - chosen)
+            left_out = f"{n_out} {left_out_as}" if n_out else ""
             redo &= chosen
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo and client is None:
@@ -216,7 +218,7 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
             elif not quiet:
                 # runs not done and not selected: they are not "done" (tfm limit's kept points)
                 print(f"campaign {spec.name}: nothing to run, {len(status.done)} of {len(spec.runs)} runs "
-                      f"already done" + (f", {left_out} not selected" if left_out else "")
+                      f"already done" + (f", {left_out}" if left_out else "")
                       + f" -> {store.root}", file=sys.stderr)
             try:
                 store.write_tables(spec)
@@ -264,10 +266,10 @@ def _check_memory(spec, todo: list[Run], workers: int) -> None:
 
 
 def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped: int, quiet: bool,
-             handled: set[str], left_out: int = 0) -> None:
+             handled: set[str], left_out: str = "") -> None:
     """Store each outcome as it comes; ``handled`` collects the ids stored, also when the
     outcomes stop early (an interrupted campaign). ``skipped`` runs were done before,
-    ``left_out`` not done and not selected (for the closing line)."""
+    ``left_out`` says how many are not done and not selected (for the closing line)."""
     from .store import code_here, same_code
 
     bar = _progress(spec.name, len(todo), quiet)
@@ -310,7 +312,7 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
               "(see prov_code_hash)", file=sys.stderr)
     if not quiet and len(handled) == len(todo):
         print(f"campaign {spec.name}: {len(todo) - failed} runs done, {failed} failed, "
-              f"{skipped} already done" + (f", {left_out} not selected" if left_out else "")
+              f"{skipped} already done" + (f", {left_out}" if left_out else "")
               + f" -> {store.root}", file=sys.stderr)
 
 

@@ -14,6 +14,26 @@ fracture". Three steps, one module each:
 """
 from __future__ import annotations
 
+# The limit study's campaigns, and where `tfm limit` keeps a point per finished run (the
+# runs themselves are too large to keep): here, so that `tfm campaign status` can count
+# them without loading the analysis.
+LIMIT_CAMPAIGNS = (("paraboloid", "limit_sphere"), ("flat punch", "limit_punch"))
+POINTS_FILE = "points.csv"
+DEFAULT_OUT = "results/limit"          # tfm limit --out: where the repository keeps its points
+
+
+def kept_limit_points(campaign: str, out: str = DEFAULT_OUT) -> tuple[str, set[str]]:
+    """(the points file, the run ids with a kept point) for a limit campaign's name; an
+    empty set for another campaign or without the file."""
+    import csv
+    from pathlib import Path
+
+    path = Path(out) / POINTS_FILE
+    if campaign not in {stem for _, stem in LIMIT_CAMPAIGNS} or not path.is_file():
+        return str(path), set()
+    with open(path, newline="") as fh:
+        return str(path), {row["run_id"] for row in csv.DictReader(fh) if row.get("run_id")}
+
 
 def __getattr__(name):
     # lazy: `tfm --help` registers `tfm paper` without loading pandas (tests/test_cli.py)

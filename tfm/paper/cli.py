@@ -36,7 +36,7 @@ def add_limit_arguments(ap: argparse.ArgumentParser) -> None:
                     help="figure, REPORT.md and the kept points, points.csv, read from there (or, when it has "
                          "none, from results/limit) and rewritten (default results/limit)")
     ap.add_argument("-q", "--quiet", action="store_true",
-                    help="no progress of the campaigns (the claims table is still printed: it is the result)")
+                    help="no progress of the campaigns and no table of the fits (they are in REPORT.md)")
 
 
 def cmd_paper(args) -> int:

@@ -28,9 +28,8 @@ import pandas as pd
 
 from .. import analysis, theory
 from ..analysis import fraction_text
+from . import DEFAULT_OUT, LIMIT_CAMPAIGNS, POINTS_FILE  # noqa: F401 (the limit's files, one home)
 
-# (geometry, campaign file stem)
-LIMIT_CAMPAIGNS = (("paraboloid", "limit_sphere"), ("flat punch", "limit_punch"))
 # fewest points for a fit with an interval (3 parameters + 2 degrees of freedom)
 MIN_FIT_POINTS = 5
 # The stability check refits without each point: y_inf, C and p from n - 1 points leave
@@ -100,8 +99,6 @@ def _run_file_source(meta: dict) -> str:
 # `tfm limit` takes a kept point for a run whose file is not in its results folder (a new
 # clone, another machine) instead of computing the run again, so a campaign of many hours
 # can be finished over several sittings and refitted from the table alone.
-POINTS_FILE = "points.csv"
-DEFAULT_OUT = "results/limit"          # tfm limit --out: where the repository keeps its points
 POINT_COLUMNS = ("geometry", "run_id", "self_term", "spacing", "ratio", "max_indent", "step", "F_max", "y",
                  "step_bound", "wall_time", "warnings", "source")
 
@@ -687,7 +684,9 @@ def main_limit(args) -> int:
         wanted = only or {g: {r.run_id for r in spec.runs} for g, spec in specs.items()}
         only = {g: ids - set(kept["run_id"]) for g, ids in wanted.items()}
         done = run_specs(specs, args.jobs, results_dir, quiet=args.quiet, only=only,
-                         checkpoint_every=args.checkpoint_every)
+                         checkpoint_every=args.checkpoint_every,
+                         left_out_as=f"with a kept point in {source} or not selected" if len(kept)
+                         else "not selected")
         computed = sum(n for _, n in done.values())
     frames = [stored_points(g, spec, results_dir) for g, spec in specs.items()]
     stored = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()

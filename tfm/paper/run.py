@@ -102,13 +102,17 @@ def run_specs(specs: dict, jobs: int, results_dir: Path, quiet: bool = False, or
     ``{key: (seconds, runs computed now)}``."""
     from ..campaign import CampaignStore, run_campaign
 
+    from . import LIMIT_CAMPAIGNS
+
+    limit_names = {stem for _, stem in LIMIT_CAMPAIGNS}
     out = {}
     for key in order or list(specs):
         spec = specs[key]
         store = CampaignStore.for_spec(spec, results_dir)
         stored = len(store.status(spec).done)
         if not quiet:
-            print(f"[tfm.paper] {spec.name}: {len(spec.runs)} runs, {stored} stored", file=sys.stderr, flush=True)
+            print(f"[{'tfm limit' if spec.name in limit_names else 'tfm paper'}] {spec.name}: {len(spec.runs)} runs, "
+                  f"{stored} stored", file=sys.stderr, flush=True)
         t0 = time.perf_counter()
         run_campaign(spec, jobs=jobs, quiet=quiet, results_dir=results_dir,
                      only=None if only is None else only.get(key, set()), **campaign_options)
