@@ -170,6 +170,10 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="spacing 1/32 instead of 1/64")
     ap.add_argument("-o", "--out", default=str(OUT))
     args = ap.parse_args(argv)
+    try:
+        import ContactMechanics  # noqa: F401
+    except ImportError:
+        raise SystemExit("validate: ContactMechanics is not installed: pip install -e \".[validate]\" first") from None
     inv = 32 if args.quick else 64
     rows, curves = compare(inv)
     report(rows, curves, inv, Path(args.out))

@@ -494,7 +494,10 @@ def test_bad_view_arguments_exit_2_before_drawing(stored_run, tmp_path, capsys, 
 
 
 def test_the_fps_range_is_what_a_gif_can_store():
-    from tfm.viewcli import GIF_MAX_FPS, ViewError, check_fps
+    from tfm.viewcli import DEFAULT_FPS, GIF_MAX_FPS, ViewError, check_fps, gif_centiseconds
+
+    # the default plays as given: 8 fps played at 8.33, with a note on every plain animate
+    assert 100 / gif_centiseconds(DEFAULT_FPS) == DEFAULT_FPS
 
     from tfm.viewcli import gif_centiseconds
 
