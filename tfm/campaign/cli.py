@@ -52,7 +52,8 @@ def register(subparsers) -> None:
                                         "run failed; 2: bad input.")
     status.add_argument("file", help="campaign file, e.g. campaigns/smoke.toml")
     _max_runs_flag(status)
-    status.add_argument("--results-dir", default=RESULTS_DIR, help="parent of results/<name>/ (default results; another one must exist)")
+    status.add_argument("--results-dir", default=RESULTS_DIR,
+                        help="parent of results/<name>/ (default results; another one must exist)")
     status.add_argument("-v", "--verbose", action="store_true", help="one line per run")
     status.set_defaults(func=cmd_status)
 
@@ -60,7 +61,8 @@ def register(subparsers) -> None:
                          description="One line per campaign file: its runs, how many are done and failed, "
                                      "and its description. Exit status 2 if a file is invalid.")
     lst.add_argument("--dir", default="campaigns", help="folder of campaign files (default campaigns)")
-    lst.add_argument("--results-dir", default=RESULTS_DIR, help="parent of results/<name>/ (default results; another one must exist)")
+    lst.add_argument("--results-dir", default=RESULTS_DIR,
+                     help="parent of results/<name>/ (default results; another one must exist)")
     lst.set_defaults(func=cmd_list)
 
     expand = sub.add_parser("expand", help="print the runs a campaign file expands to",
@@ -126,12 +128,12 @@ def cmd_status(args) -> int:
     from .store import CampaignStore
 
     spec = load_spec(args.file, max_runs=args.max_runs)
+    _check_results_dir(args.results_dir)
     store = CampaignStore.for_spec(spec, args.results_dir)
     conflict = store.source_conflict(spec)
     if conflict:
         print(f"tfm: error: {conflict}", file=sys.stderr)
         return 2
-    _check_results_dir(args.results_dir)
     st = store.status(spec)
     print(f"{spec.name}: {st.total} runs: {len(st.done)} done ({len(st.flagged)} flagged), "
           f"{len(st.pending)} pending, {len(st.failed)} failed"

@@ -140,18 +140,17 @@ class CampaignStore:
         (the short wait covers a killed runner's children that are still exiting)."""
         import fcntl
 
+        for folder in (self.runs_dir, self.failures_dir, self.checkpoints_dir):
+            if folder.exists() and not folder.is_dir():
+                # found before any run, not as a full disk after the first one
+                raise CampaignError(f"results-dir: {folder} is a file, where the campaign keeps its "
+                                    f"{folder.name}/ folder; move it away")
         try:
             self.root.mkdir(parents=True, exist_ok=True)
             fh = open(self.root / ".lock", "a+")
         except OSError as exc:                # before any run: say where, not a traceback
             raise CampaignError(f"results-dir: cannot write the campaign folder {self.root}: "
                                 f"{exc.strerror or exc}") from None
-        for folder in (self.runs_dir, self.failures_dir, self.checkpoints_dir):
-            if folder.exists() and not folder.is_dir():
-                # found before any run, not as a full disk after the first one
-                fh.close()
-                raise CampaignError(f"results-dir: {folder} is a file, where the campaign keeps its "
-                                    f"{folder.name}/ folder; move it away")
         with fh:
             deadline = time.monotonic() + wait
             while True:

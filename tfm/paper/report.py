@@ -255,7 +255,8 @@ def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], 
     lines += [
         "## Run",
         "",
-        f"- wall time of this `{'tfm paper --quick' if quick else 'make paper'}`: **{wall / 60:.1f} min** ({wall:.0f} s) with `--jobs {jobs}`, "
+        f"- wall time of this `{'tfm paper --quick' if quick else 'make paper'}`: **{wall / 60:.1f} min** "
+        f"({wall:.0f} s) with `--jobs {jobs}`, "
         f"{total_runs} runs in {len(runs)} campaigns, {computed} of them computed by this invocation "
         f"({'a full run from empty result folders' if computed == total_runs else 'the rest resumed from results/'}); "
         f"the runs' own compute time adds up to {run_seconds:.0f} s (with each worker's first compilation of the "
