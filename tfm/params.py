@@ -282,29 +282,29 @@ class Params:
     def advise(self, given: Mapping[str, Any], prefix: str = "", stacklevel: int = 2) -> None:
         """Warn (ParameterWarning) about the parameters in ``given`` (name -> value as
         given) that have no effect on this record, and a map without a pixel size (a loose
-        tree is a note of the run: tfm.guards.check). Once per record: Params.from_dict and replace advise on what they were given,
-        and tfm.simulate advises a record built otherwise on its fields off their defaults.
-        ``stacklevel`` as warnings.warn's, seen from the caller of advise."""
+        tree is a note of the run: tfm.guards.check). Once per record: Params.from_dict and
+        replace advise on what they were given, and tfm.simulate advises a record built
+        otherwise on its fields off their defaults. ``stacklevel`` as warnings.warn's, seen
+        from the caller of advise."""
         object.__setattr__(self, "_advised", True)      # not a field: not compared, hashed or stored
-        params = self
         stacklevel += 1
         for name in given:
             rule = APPLIES.get(name)
-            if rule is not None and not rule.applies(params) and not rule.also(params):
+            if rule is not None and not rule.applies(self) and not rule.also(self):
                 warnings.warn(f"{prefix}{name}: given but has no effect; it applies only when {rule.when}",
                               ParameterWarning, stacklevel=stacklevel)
-        for name, why in _moot(params):
+        for name, why in _moot(self):
             if name in given and given[name] != _DEFAULTS[name]:
                 warnings.warn(f"{prefix}{name}: given but has no effect here: {why}", ParameterWarning,
                               stacklevel=stacklevel)
         # a map without a pixel size is drawn at the spacing: a new map, or a new spacing,
         # makes another body
         if (("height_map" in given or "spacing" in given) and "map_pixel_size" not in given
-                and params.shape == "height_map" and params.map_pixel_size is None):
+                and self.shape == "height_map" and self.map_pixel_size is None):
             from .surfaces import load_height_map
-            if load_height_map(params.height_map).pixel_size is None:
+            if load_height_map(self.height_map).pixel_size is None:
                 warnings.warn(f"{prefix}map_pixel_size: not given, and the map carries none (a .npy array): its pixel is "
-                              f"the spacing ({params.spacing:g}), so at another spacing it is another body, "
+                              f"the spacing ({self.spacing:g}), so at another spacing it is another body, "
                               "scaled with it; give map_pixel_size to fix its size", ParameterWarning,
                               stacklevel=stacklevel)
 

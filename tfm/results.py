@@ -161,12 +161,11 @@ class RunResult:
             if Path(self.fields_path).resolve() != dest.resolve():
                 # through a temporary name in the destination folder: a kill leaves no half file
                 dest.parent.mkdir(parents=True, exist_ok=True)
-                tmp = dest.with_name(f".{dest.name}.{os.getpid()}.tmp")
-                if self._fields_stay:
-                    shutil.copyfile(self.fields_path, tmp)
-                else:
-                    shutil.move(str(self.fields_path), tmp)
-                os.replace(tmp, dest)
+                with through_temporary(dest) as tmp:
+                    if self._fields_stay:
+                        shutil.copyfile(self.fields_path, tmp)
+                    else:
+                        shutil.move(str(self.fields_path), tmp)
                 self.fields_path = dest
             self._fields_stay = True         # the table keeps its own
             extra["fields"] = dest.name

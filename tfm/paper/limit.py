@@ -28,7 +28,7 @@ import pandas as pd
 
 from .. import analysis, theory
 from ..analysis import fraction_text
-from . import DEFAULT_OUT, LIMIT_CAMPAIGNS, POINTS_FILE  # noqa: F401 (the limit's files, one home)
+from . import DEFAULT_OUT, LIMIT_CAMPAIGNS, POINTS_FILE  # the limit's files (defined in the package)
 
 # fewest points for a fit with an interval (3 parameters + 2 degrees of freedom)
 MIN_FIT_POINTS = 5
