@@ -343,9 +343,31 @@ def test_simulate_turns_a_record_to_si_units_and_refuses_what_is_no_record():
 
 
 def test_a_name_in_the_wrong_case_gets_its_hint():
-    """'tre' got "did you mean 'tree'?", 'FFT' got no hint."""
+    """'tre' got "did you mean 'tree'?", 'FFT' got no hint. The record itself holds the
+    values as the docs write them, so a direct construction is still refused."""
     with pytest.raises(ParameterError, match=r"operator: unknown value 'FFT'.*did you mean 'fft'\?"):
-        Params.from_dict(dict(operator="FFT"))
+        Params(operator="FFT")
+
+
+def test_loose_input_reads_choices_case_blind():
+    """`tfm run --units SI` and `--snap-rule Batch` were refused with a hint (a user's
+    hunt); the command line, TOML and from_dict now read them as 'si' and 'batch', the
+    same run as the lower-case spelling."""
+    from tfm.params import _KINDS, CHOICES
+
+    si = dict(youngs_modulus=1e6, poisson_ratio=0.5, work_of_adhesion=0.05, radius=1e-3,
+              spacing=3.4e-6, step=1e-8)
+    loose = Params.from_dict(dict(si, units="SI", snap_rule="Batch", shape=" Paraboloid ",
+                                  operator="FFT", kernel="Boussinesq", layout="Square",
+                                  preconditioner="Auto", control="Displacement",
+                                  threshold_disorder="None"))
+    exact = Params.from_dict(dict(si, units="si", snap_rule="batch", shape="paraboloid"))
+    assert loose == exact and loose.run_id == exact.run_id
+    # every text field with a fixed set of values is read this way
+    assert set(CHOICES) == {name for name, kind in _KINDS.items() if kind == "str"} - {
+        "height_map", "height_map_hash", "allow"}
+    with pytest.raises(ParameterError, match=r"units: unknown value 'S I'"):
+        Params.from_dict(dict(units="S I"))
 
 
 def test_minus_zero_is_the_same_run_as_zero():

@@ -43,6 +43,14 @@ SNAPSHOT_MODES = ("none", "events")
 DISORDERS = ("none", "uniform", "weibull")
 UNITS = ("paper", "si")
 
+#: the text-valued fields and their values; loose input (the command line, TOML, from_dict)
+#: is read case-blind against these, the record itself holds them as written here
+CHOICES: dict[str, tuple[str, ...]] = {
+    "shape": SHAPES, "kernel": KERNELS, "operator": OPERATORS, "layout": LAYOUTS,
+    "snap_rule": SNAP_RULES, "preconditioner": PRECONDITIONERS, "control": CONTROLS,
+    "threshold_disorder": DISORDERS, "units": UNITS,
+}
+
 
 class ParameterError(ValueError):
     """A run parameter is missing, malformed or outside its allowed range."""
@@ -502,6 +510,8 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
         if value is None:
             return None
         kind = _KINDS[key]
+        if key in CHOICES and isinstance(value, str) and value.strip().lower() in CHOICES[key]:
+            return value.strip().lower()           # "SI", "Batch", " paraboloid"
         if key == "max_indent":
             if isinstance(value, str) and value.strip().lower() == "auto":
                 return "auto"
