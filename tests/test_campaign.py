@@ -157,6 +157,24 @@ def test_cli_reports_a_bad_file_and_runs_nothing(tmp_path, capsys):
     assert not (tmp_path / "res").exists()                            # validated before anything ran
 
 
+def test_a_direct_run_of_weeks_is_refused_before_the_campaign_starts(tmp_path, capsys):
+    """A campaign's direct-sum run estimated at weeks started among the others and failed
+    as a run of its own (the cost guard is this machine's, so campaign files skip it).
+    Now `campaign run` refuses it before any run, naming it and its override."""
+    text = BASE.replace('"1/32"', '"1/2048"').replace("max_indent = 0.025", "max_indent = 0.5\nstep = 1e-2") \
+        + 'operator = "direct"\n[sweep]\nalpha = [0.5, 0.75]\n'
+    path = _write(tmp_path, text)
+    assert len(load_spec(path).runs) == 2                             # the file itself is valid
+    assert tfm_main(["campaign", "run", str(path), "--results-dir", str(tmp_path / "res")]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: run 0 " in err and "the direct sum over" in err and 'allow = "cost"' in err
+    assert not list((tmp_path / "res").rglob("*.parquet"))            # nothing ran
+    allowed = text.replace('operator = "direct"', 'operator = "direct"\nallow = "cost"')
+    path.write_text(allowed)
+    from tfm.campaign.runner import _check_cost
+    _check_cost(load_spec(path), load_spec(path).runs)               # allowed: no refusal
+
+
 def test_missing_file(tmp_path):
     with pytest.raises(CampaignError, match="no such campaign file"):
         load_spec(tmp_path / "nope.toml")

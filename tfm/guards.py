@@ -314,6 +314,20 @@ def direct_cost_note(p) -> str | None:
             f"loading steps x (springs x springs in contact)^1.25); {_faster(p)} far faster")
 
 
+def check_cost(p) -> list[str]:
+    """The ``cost`` guard: refuse (GuardError) a direct-sum run estimated at more than
+    COST_GUARD_SECONDS unless allowed; its note if allowed. The estimate is this VM's, so
+    campaign files are not checked with it; a campaign checks it when it starts."""
+    took = direct_cost_estimate(p)
+    if took is None or took <= COST_GUARD_SECONDS:
+        return []
+    notes: list[str] = []
+    _guard(notes, _allowed(p), "cost", f"operator: the direct sum over {n_springs(p):,} springs would take "
+           f"roughly {_duration(took)} (scaled from the standard curve at spacing 1/256, "
+           f"{DIRECT_REFERENCE_SECONDS / 60:.1f} minutes on a 2-core VM); {_faster(p)} far faster")
+    return notes
+
+
 def contact_reached_note(p, max_n_contact: int) -> str | None:
     """After a run: the ``coarse`` guard on the contact the run reached (the estimate
     before it assumes a smooth body: a rough one can touch at a few springs only). The
@@ -393,11 +407,7 @@ def check(p, memory: bool = True) -> list[str]:
             _guard(notes, allowed, "memory", f"spacing/extent: the run needs about {need / 2**30:.1f} GiB "
                               f"({n_springs(p):,} springs, operator {p.operator}) but "
                               f"{have / 2**30:.1f} GiB is available. Coarsen the spacing or shrink extent")
-        took = direct_cost_estimate(p)
-        if took is not None and took > COST_GUARD_SECONDS:
-            _guard(notes, allowed, "cost", f"operator: the direct sum over {n_springs(p):,} springs would take "
-                            f"roughly {_duration(took)} (scaled from the standard curve at spacing 1/256, "
-                            f"{DIRECT_REFERENCE_SECONDS / 60:.1f} minutes on a 2-core VM); {_faster(p)} far faster")
+        notes += check_cost(p)
     if p.operator == "tree" and p.kernel == "boussinesq" and p.theta > LOOSE_THETA:
         from .tree_operator import tree_error_bound
         notes.append(f"theta: {p.theta:g} is loose: the tree's error bound is {tree_error_bound(p.theta):.2g} of "

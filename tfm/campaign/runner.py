@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from ..config import CHECKPOINT_EVERY
-from ..guards import direct_cost_note, n_springs
+from ..guards import GuardError, check_cost, direct_cost_note, n_springs
 from ..params import ParameterError
 from .spec import CampaignError, CampaignSpec, Run, load_spec
 from .store import CampaignStore
@@ -187,6 +187,7 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
         todo = [run for run in spec.runs if run.run_id in redo]
         if todo and client is None:
             _check_memory(spec, todo, min(jobs, len(todo)))
+        _check_cost(spec, todo)
         costly = [(run, note) for run in todo if (note := direct_cost_note(run.params))]
         if costly:                           # even with quiet: hours may be at stake
             run, note = max(costly, key=lambda rn: n_springs(rn[0].params))
@@ -263,6 +264,17 @@ def _check_memory(spec, todo: list[Run], workers: int) -> None:
                             f"{estimate_memory(big.params) / 2**30:.2f} GiB, {need / 2**30:.2f} GiB for "
                             f"{workers} at once, but {have / 2**30:.2f} GiB is available. Use fewer --jobs, "
                             "a coarser spacing, or allow = \"memory\" for these runs")
+
+
+def _check_cost(spec, todo: list[Run]) -> None:
+    """Refuse, before any run starts, direct-sum runs estimated at more than a week (the
+    ``cost`` guard; each used to start and fail as a run of its own, among the others)."""
+    for run in todo:
+        try:
+            check_cost(run.params)
+        except GuardError as exc:
+            raise CampaignError(f"{spec.source}: run {run.index} {run.run_id}: {exc} Give the run "
+                                "allow = \"cost\" in the campaign file to run it anyway") from None
 
 
 def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped: int, quiet: bool,
