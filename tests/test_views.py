@@ -81,6 +81,8 @@ def test_default_figure_renders_without_faults(case, tmp_path):
         assert "Hertz (paraboloid approximation of the sphere)" in labels
     else:
         assert any("flat punch" in lab for lab in labels)
+        # (b)'s dashed a = R line had no name at all (no legend there)
+        assert [t.get_text() for t in fig.axes[1].texts if "R" in t.get_text()] == ["$a = R$"]
     assert [t.get_text() for t in fig.texts][:2] == ["(a)", "(b)"] or \
         {"(a)", "(b)"} <= {t.get_text() for ax in fig.axes for t in ax.texts}
     # the unloading line stops at the last step in contact; the snap-off is a jump

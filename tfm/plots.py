@@ -323,6 +323,9 @@ def draw_reference(ax1, ax2, p, dmax):
     a = np.full_like(delta, p.radius) if p.shape == "flat_punch" else theory.hertz_radius(delta, p.radius)
     ax1.plot(delta, P, "k--", lw=0.8, label=label)
     ax2.plot(P, a, "k--", lw=0.8, label=label if p.shape != "flat_punch" else None)
+    if p.shape == "flat_punch":          # (b) has no legend of its own: name the line there
+        ax2.annotate("$a = R$", (P[-1], p.radius), xytext=(0, -4), textcoords="offset points",
+                     ha="right", va="top", fontsize=7)
 
 
 # ---- one run ------------------------------------------------------------------
@@ -788,7 +791,7 @@ def plot_kernel_study(summary, slopes, crossings, path=None, title=None):
     ax2.set_xlabel("$\\alpha$")
     ax2.set_ylabel("d ln $F_{max}$ / d ln $\\Delta$")
     ax2.set_title("spacing slope; zero crossing = convergent $\\alpha$")
-    ax2.legend(fontsize=6, loc="lower right")
+    ax2.legend(fontsize=6, loc="upper left")
     tidy_ticks(ax2)
     letter(axes[:n])
     if title:
