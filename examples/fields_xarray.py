@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 import tfm
-from tfm.plots import fold_offsets
+from tfm.plots import draw_jump, fold_offsets, split_snap_off
 
 
 def main(out: Path) -> None:
@@ -46,7 +46,10 @@ def main(out: Path) -> None:
     ax1.set_aspect("equal")
     ax1.set_title(f"(a) forces at pull-off, step {k}")
     ax2.plot(ds["force"], radius, "o", ms=3, label="from the fields")
-    ax2.plot(res.curve["force"], res.curve["contact_radius"], "-", lw=0.8, label="curve table")
+    body, jump = split_snap_off(res.curve)          # the final snap-off is a jump, not a line
+    line, = ax2.plot(body["force"], body["contact_radius"], "-", lw=0.8, label="curve table")
+    if jump is not None:
+        draw_jump(ax2, jump["force"], jump["contact_radius"], line.get_color())
     ax2.set_xlabel("force P (compression > 0)")
     ax2.set_ylabel("contact radius a")
     ax2.set_title("(b) contact radius")
