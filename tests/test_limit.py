@@ -221,8 +221,15 @@ def test_limit_where_and_max_ratio_select_runs_in_both_campaigns():
     assert select_limit_runs(specs, None, []) is None
     only = select_limit_runs(specs, 20.0, ["self_term=3.8"])
     for g, spec in specs.items():
-        want = {r.run_id for r in spec.runs if r.params.self_term == 3.8 and spec_ratio(r.params) <= 20.0 * (1 + 1e-9)}
+        want = {r.run_id for r in spec.runs if r.params.self_term == 3.8 and spec_ratio(r.params) <= 20.0}
         assert only[g] == want and want
+    # the points are named 8, 16, 32, ... but sit at 8.03, 16.05, 32.0: --max-ratio 8 was
+    # refused ("the smallest is 8.03") and --max-ratio 16 left out the points named 16
+    for named in (8.0, 16.0):
+        only = select_limit_runs(specs, named, [])
+        for g, spec in specs.items():
+            ratios = [spec_ratio(r.params) for r in spec.runs if r.run_id in only[g]]
+            assert max(ratios) == pytest.approx(named, abs=0.06), (g, ratios)   # 8.025, 16.051
     with pytest.raises(CampaignError, match="self_term"):
         select_limit_runs(specs, None, ["self_term=9"])
 
@@ -497,7 +504,7 @@ def test_tfm_limit_max_ratio_below_every_run_is_refused(capsys):
     from tfm.paper.run import load_spec_for
 
     specs = {g: load_spec_for(stem) for g, stem in LIMIT_CAMPAIGNS}
-    with pytest.raises(CampaignError, match=r"--max-ratio: no run has a_c/Δ <= 5; the smallest is 8"):
+    with pytest.raises(CampaignError, match=r"--max-ratio: no run has a_c/Δ <= 5; the smallest is 8.03"):
         select_limit_runs(specs, 5.0, [])
     with pytest.raises(CampaignError, match=r"no run that matches --where has a_c/Δ <= 5"):
         select_limit_runs(specs, 5.0, ["self_term=3.8"])

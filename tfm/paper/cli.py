@@ -24,7 +24,8 @@ def add_limit_arguments(ap: argparse.ArgumentParser) -> None:
 
     ap.add_argument("-j", "--jobs", type=int, default=1, help="parallel runs (process pool); default 1")
     ap.add_argument("--max-ratio", type=float, default=None, metavar="N",
-                    help="run only the points with a_c/Δ <= N (the rest stay pending; rerun without it to finish)")
+                    help="run only the points with a_c/Δ <= N, as the campaign files name them (8, 16, 32, ...; "
+                         "the point named 16 sits at 16.05); the rest stay pending: rerun without it to finish")
     ap.add_argument("--where", action="append", default=[], metavar="KEY=VALUE",
                     help="run only the points with this parameter value, e.g. self_term=3.8 (repeat to "
                          "combine; with --max-ratio both apply)")

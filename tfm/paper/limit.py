@@ -51,6 +51,14 @@ def spec_ratio(params) -> float:
     return theory.jkr_critical_radius(k_eff, params.radius) / params.spacing
 
 
+def within_ratio(params, max_ratio: float) -> bool:
+    """Whether a run's point counts as a_c/Δ <= max_ratio, as the campaign files name
+    their points (8, 16, 32, ...): Δ = 1/n with n rounded to a whole number, so a point
+    named 16 sits at 16.05; rounding n moves a/Δ by at most half of a (in lengths)."""
+    ratio = spec_ratio(params)
+    return ratio - 0.5 * ratio * params.spacing <= max_ratio * (1 + 1e-9)
+
+
 def coefficient(params, f_max: float) -> float:
     """F_max over the continuum reference with K = K_eff: (K² R) or Kendall's force."""
     k_eff = theory.effective_toughness(params.threshold_force, params.spacing)
@@ -629,8 +637,7 @@ def select_limit_runs(specs: dict, max_ratio: float | None, where) -> dict | Non
             except CampaignError as exc:
                 errors.append(exc)
                 runs = ()
-        only[geometry] = {r.run_id for r in runs
-                          if max_ratio is None or spec_ratio(r.params) <= max_ratio * (1 + 1e-9)}
+        only[geometry] = {r.run_id for r in runs if max_ratio is None or within_ratio(r.params, max_ratio)}
     if len(errors) == len(specs):
         raise errors[0]
     if max_ratio is not None and not any(only.values()):
