@@ -704,9 +704,18 @@ def test_every_table_row_rebuilds_its_params_with_the_same_run_id(serial_run, ca
     assert tfm_main(["campaign", "expand", str(SMOKE), "--json"]) == 0
     for line in capsys.readouterr().out.splitlines():
         record = json.loads(line)
+        # from_row, whose docstring names these rows, read none of their bare names and
+        # gave the default run, silently (a user's hunt)
+        assert Params.from_row(record).run_id == record["run_id"]
         run_id = record.pop("run_id")
         record.pop("index")
         assert Params.from_dict(record).run_id == run_id
+    # a row short of a parameter's column rebuilt another run at that parameter's default
+    row = dict(summary.iloc[0])
+    del row["p_shape"]
+    with pytest.raises(tfm.ParameterError, match=f"its run_id is {row['run_id']}, but its parameters make run "
+                                             r"\w+; the row has no column p_shape"):
+        Params.from_row(row)
 
 
 # ---- guards and sizes at expansion -------------------------------------------------------

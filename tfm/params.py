@@ -276,16 +276,30 @@ class Params:
     def from_row(cls, row: Mapping[str, Any], prefix: str = "p_") -> "Params":
         """Rebuild the record from a table row (summary, failures, ``tfm campaign expand
         --json``): the ``<prefix><name>`` columns, where a missing value (NaN, NA) of an
-        optional parameter is None. The run id is the stored one."""
+        optional parameter is None. A row without such columns but with the bare names
+        (``expand --json``) is read by those. A row with a ``run_id`` must give that run
+        back: a row short of a column rebuilt another run at that column's default, silently."""
+        names = cls.field_names()
+        if prefix and not any(prefix + n in row for n in names) and any(n in row for n in names):
+            prefix = ""
         values = {}
-        for name in cls.field_names():
+        for name in names:
             if prefix + name not in row:
                 continue
             value = row[prefix + name]
             if _is_missing(value) and name in _OPTIONAL:
                 value = None
             values[name] = value
-        return cls.from_dict(values, where="table row")
+        params = cls.from_dict(values, where="table row")
+        stored = row["run_id"] if "run_id" in row else None
+        if isinstance(stored, str) and params.run_id != stored:
+            absent = [prefix + n for n in names if n not in values and n not in NOT_HASHED]
+            why = (f"; the row has no column {', '.join(absent[:5])}{', ...' if len(absent) > 5 else ''}"
+                   if absent else "; its values do not make that run (another tfm schema, or a changed "
+                                  "height map?)")
+            raise ParameterError(f"table row: its run_id is {stored}, but its parameters make run "
+                                 f"{params.run_id}{why}")
+        return params
 
     def advise(self, given: Mapping[str, Any], prefix: str = "", stacklevel: int = 2) -> None:
         """Warn (ParameterWarning) about the parameters in ``given`` (name -> value as
