@@ -99,6 +99,28 @@ def test_convergent_alpha_without_a_significant_gradient_has_no_interval():
     assert (zc.ci_low, zc.ci_high) == (-math.inf, math.inf)
 
 
+def test_kernel_slopes_refuse_to_pool_runs_that_differ_in_another_parameter():
+    """A campaign over spacing and radius gave one slope over both radii (-0.51, where
+    the radii give -0.47 and -0.54: a user's hunt). Two runs at one spacing in a group
+    are refused, naming what they differ in; with that column in ``by``, one exact fit
+    each (pull-offs built as c R spacing^slope)."""
+    import pandas as pd
+
+    from tfm.analysis import kernel_slopes
+
+    rows = [dict(p_kernel="boussinesq", p_alpha=0.5, p_spacing=h, p_radius=r, p_seed=0,
+                 r_pull_off_force=r * h ** slope)
+            for r, slope in ((1.0, -0.47), (4.0, -0.54)) for h in (1 / 16, 1 / 24, 1 / 32)]
+    table = pd.DataFrame(rows)
+    with pytest.raises(ValueError, match=r"has 6 runs at 3 spacing\(s\); they differ in p_radius: "
+                                         r"give by=\('p_kernel', 'p_alpha', 'p_radius'\)"):
+        kernel_slopes(table)
+    fits = kernel_slopes(table, by=("p_kernel", "p_alpha", "p_radius"))
+    assert fits["slope"].tolist() == pytest.approx([-0.47, -0.54], abs=1e-12)     # exact power laws
+    with pytest.raises(ValueError, match="one run repeated: drop the duplicates"):
+        kernel_slopes(pd.concat([table[table["p_radius"] == 1.0]] * 2))
+
+
 def test_kernel_claim_does_not_agree_through_an_unbounded_interval():
     """The paper claim for the Boussinesq kernel (alpha* = 0.75) from slopes with no
     significant trend in alpha: the crossing's interval is infinite, so it holds 0.75

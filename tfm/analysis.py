@@ -283,10 +283,21 @@ def _column_list(names, what: str, table: pd.DataFrame) -> list[str]:
 
 def kernel_slopes(summary: pd.DataFrame, value: str = "r_pull_off_force",
                   by: tuple[str, ...] = ("p_kernel", "p_alpha")) -> pd.DataFrame:
-    """One spacing slope per group of a campaign summary (default: per kernel and alpha)."""
+    """One spacing slope per group of a campaign summary (default: per kernel and alpha).
+    A group with two runs at one spacing is refused, naming the columns they differ in:
+    runs at other radii, self terms or seeds were pooled into one fit, silently."""
     rows = []
     by = _column_list(by, "kernel_slopes: by", summary)
     for key, g in summary.groupby(by, sort=True):
+        repeated = g[g["p_spacing"].duplicated(keep=False)]
+        if len(repeated):
+            differ = [c for c in g.columns if c.startswith("p_") and c not in by
+                      and repeated.groupby("p_spacing")[c].agg(lambda v: v.astype(str).nunique()).max() > 1]
+            group = dict(zip(by, key if isinstance(key, tuple) else (key,)))
+            advice = (f"they differ in {', '.join(differ)}: give by={(*by, *differ)!r} for one fit each"
+                      if differ else "they are one run repeated: drop the duplicates")
+            raise ValueError(f"kernel_slopes: the group {group} has {len(repeated)} runs at "
+                             f"{repeated['p_spacing'].nunique()} spacing(s); {advice}")
         g = g[g[value] > 0]
         if g["p_spacing"].nunique() < 2:
             continue
