@@ -1018,8 +1018,9 @@ def test_a_kernel_that_is_not_positive_definite_is_refused_before_anything_runs(
     a campaign file expanded, then failed each run at its start (IllPosedKernel)."""
     base = {"spacing": "1/32", "k_th": 0.02, "shape": "paraboloid", "max_indent": 0.05, "step": 1e-3,
             "kernel": "neighbors"}
-    with pytest.raises(CampaignError, match="not positive definite"):
-        spec_from_dict({"name": "bad", "base": base, "sweep": {"neighbor_rings": [1, 2]}})
+    # it named neither the file nor the run, unlike every other refusal (a user's hunt)
+    with pytest.raises(CampaignError, match=r"^bad\.toml: run 0 \(neighbor_rings=1\): kernel: .*not positive definite"):
+        spec_from_dict({"name": "bad", "base": base, "sweep": {"neighbor_rings": [1, 2]}}, source="bad.toml")
     with pytest.raises(tfm.ParameterError, match="not positive definite"):      # as tfm run says
         tfm.simulate(**{**base, "neighbor_rings": 1})
 

@@ -260,7 +260,7 @@ def _expand(base, sweep, zips, where):
                 else:
                     warnings.warn(w.message, w.category, stacklevel=2)
             notes = tuple(check(params, memory=False))
-            _check_kernel(params, kernels_checked)
+            _check_kernel(params, kernels_checked, label)
         except GuardError as exc:
             raise CampaignError(f"{label}: {exc}") from None
         except ParameterError as exc:
@@ -279,7 +279,7 @@ def _expand(base, sweep, zips, where):
                           stacklevel=3)
 
 
-def _check_kernel(params: Params, checked: dict) -> None:
+def _check_kernel(params: Params, checked: dict, label: str) -> None:
     """The compliance must be positive definite (tfm run refuses it before the run; a
     campaign ran such files and failed each run at its start). One check per distinct
     kernel and grid; the default kernel on the square grid needs none (and no engine
@@ -296,7 +296,7 @@ def _check_kernel(params: Params, checked: dict) -> None:
         except ParameterError as exc:
             checked[key] = str(exc)
     if checked[key]:
-        raise ParameterError(checked[key])
+        raise ParameterError(f"{label}: {checked[key]}")     # which file and run, as every refusal
 
 
 def _table(value: Any, label: str, where: str) -> dict[str, Any]:
