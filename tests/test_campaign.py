@@ -1042,7 +1042,8 @@ def test_status_says_when_the_tables_do_not_hold_the_stored_runs(tmp_path, capsy
     capsys.readouterr()
     assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "2 done" in out and "the tables (summary, curves, failures) may not hold these runs as stored" in out
+    assert "2 done" in out and ("the tables (summary, curves, failures) do not hold these runs as stored "
+                                "(no readable summary table)") in out
     # the command it gives keeps the results folder (without it: a fresh campaign in results/)
     assert f"`tfm campaign run {toml} --results-dir {tmp_path}` rebuilds them" in out
     # while a campaign process holds the folder, that is what status says (it said the
@@ -1054,6 +1055,22 @@ def test_status_says_when_the_tables_do_not_hold_the_stored_runs(tmp_path, capsy
     run_campaign(spec, quiet=True, results_dir=tmp_path)      # the same command rebuilds them
     assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
     assert "do not hold" not in capsys.readouterr().out and store.table_path("summary").exists()
+    # a run file rewritten after the tables were
+    store.run_path(spec.runs[0].run_id).touch()
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    assert "(run files have changed since they were written" in capsys.readouterr().out
+
+
+def test_status_says_when_the_campaign_file_was_edited(tmp_path, capsys):
+    """A file edited in place after its campaign finished: status gave the reasons of a
+    killed process or of a copy (a user's hunt)."""
+    toml = _toml_of(_tiny("edited"), tmp_path)
+    assert tfm_main(["campaign", "run", str(toml), "-q", "--results-dir", str(tmp_path)]) == 0
+    toml.write_text(toml.read_text().replace("alpha = [0.5, 0.75]", "alpha = [0.5, 0.75, 1.0]"))
+    capsys.readouterr()
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "1 pending" in out and "(the campaign file has changed since they were written)" in out
 
 
 def test_a_stop_signal_after_the_last_run_is_not_an_interruption(tmp_path, monkeypatch, capsys):

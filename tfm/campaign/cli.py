@@ -154,9 +154,8 @@ def cmd_status(args) -> int:
     holder = store.running()
     if holder:
         print(f"  {holder} is running this campaign now: the tables are rebuilt when it finishes")
-    elif (st.done or st.failed) and not store.tables_current(spec, st):
-        print(f"  the tables (summary, curves, failures) may not hold these runs as stored (the campaign "
-              f"process stopped before it rebuilt them, or the run files were copied without their times): "
+    elif (st.done or st.failed) and (behind := store.tables_behind(spec, st)):
+        print(f"  the tables (summary, curves, failures) do not hold these runs as stored ({behind}): "
               f"`{store.run_command(args.file)}` rebuilds them")
     saved = _checkpoints(store, st.pending + st.failed)
     if saved:

@@ -380,6 +380,23 @@ class CampaignStore:
         campaign process killed after storing a run has not rebuilt them)."""
         return self._tables_current(self._record(spec, status or self.status(spec)))
 
+    def tables_behind(self, spec: CampaignSpec, status: Status | None = None) -> str | None:
+        """Why the tables do not hold the stored runs as they are now (None: they do)."""
+        record = self._record(spec, status or self.status(spec))
+        try:
+            written = read_metadata(self.table_path("summary")).get("campaign")
+        except (OSError, ValueError):
+            written = None
+        if self._tables_current(record):
+            return None
+        if not isinstance(written, dict):
+            return "no readable summary table"
+        if written.get("sha256") != record["sha256"]:
+            return "the campaign file has changed since they were written"
+        if (written.get("run_ids"), written.get("failed")) != (record["run_ids"], record["failed"]):
+            return "runs were stored after they were written (the campaign process stopped before it rebuilt them)"
+        return "run files have changed since they were written (or were copied without their times)"
+
     def _files_digest(self, status: Status) -> str:
         """A digest of the run and failure files as they are now: size and mtime (one stat
         each, no reading; every write replaces the file by a new one, with a new mtime).
