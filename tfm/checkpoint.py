@@ -162,7 +162,6 @@ class Checkpoint:
         self.failed_saves = 0      # saves that could not be written (try_save)
         self.save_error = ""       # the first one's reason
         self.started_at = None     # when the run first started (saved; a resumed run keeps it)
-        self.replacing = None      # what a file here holds that the caller asked to replace
 
     # ---- reading -------------------------------------------------------------
     def saved_run_id(self) -> str | None:
@@ -185,8 +184,6 @@ class Checkpoint:
 
         if not self.path.exists():
             return None
-        if self.replacing:                 # asked for: not a file that "cannot be read"
-            return self._refuse(f"holds {self.replacing}: replaced, as asked")
         with open(self.path, "rb") as fh:
             if fh.read(2) != b"PK":        # NumPy calls any other file "pickled data"
                 return self._refuse("cannot be read (not an .npz archive)")

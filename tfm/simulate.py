@@ -213,10 +213,8 @@ def _checkpoint(p: Params, path, every: float, replace: bool) -> Checkpoint:
     if ckpt.path.is_dir():
         raise ParameterError(f"checkpoint: {ckpt.path} is a folder; give a file path, such as "
                              f"{ckpt.path / 'run.npz'}")
-    what = ckpt.foreign()
-    if what is not None and replace:
-        ckpt.replacing = what              # said as such when the run sets it aside
-    elif what is not None:
+    what = None if replace else ckpt.foreign()
+    if what is not None:
         raise ParameterError(f"checkpoint: {ckpt.path} holds {what}; it is left alone: delete it, give "
                              "another path, or replace_checkpoint=True (tfm run: --overwrite) to replace it")
     try:
