@@ -119,6 +119,23 @@ def test_kernel_slopes_refuse_to_pool_runs_that_differ_in_another_parameter():
     assert fits["slope"].tolist() == pytest.approx([-0.47, -0.54], abs=1e-12)     # exact power laws
     with pytest.raises(ValueError, match="one run repeated: drop the duplicates"):
         kernel_slopes(pd.concat([table[table["p_radius"] == 1.0]] * 2))
+    # an unset optional parameter (NaN) is a value of its own: runs with and without it
+    # were "one run repeated", and groups keyed on NaN were dropped
+    unset = table.assign(p_extent=[np.nan if r == 1.0 else 1.0 for r in table["p_radius"]])
+    with pytest.raises(ValueError, match="they differ in p_radius, p_extent"):
+        kernel_slopes(unset)
+    fits = kernel_slopes(unset, by=("p_kernel", "p_alpha", "p_extent"))
+    assert fits["slope"].tolist() == pytest.approx([-0.54, -0.47], abs=1e-12)     # 1.0 sorts before NaN
+    # a missing or zero pull-off, or a group with one spacing, was left out without a word
+    one = table[table["p_radius"] == 1.0]
+    for broken in (one.assign(r_pull_off_force=[np.nan, 1.0, 2.0]), one.assign(r_pull_off_force=[0.0, 1.0, 2.0])):
+        with pytest.raises(ValueError, match=r"1 run\(s\) whose r_pull_off_force is missing or not > 0 "
+                                             r"\(spacings 1/16\)"):
+            kernel_slopes(broken)
+    with pytest.raises(ValueError, match=r"has one spacing only \(1/16\)"):
+        kernel_slopes(one.iloc[:1])
+    with pytest.raises(ValueError, match="kernel_slopes: no column 'r_nope'"):
+        kernel_slopes(one, value="r_nope")
 
 
 def test_kernel_claim_does_not_agree_through_an_unbounded_interval():

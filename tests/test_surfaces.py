@@ -470,6 +470,12 @@ def test_ensemble_stats_mean_and_spread_over_seeds():
         ensemble_stats(pd.DataFrame(rows), pd.concat(curves), seeds=["p_roughnes_seed"])
     with pytest.raises(ValueError, match="ensemble_stats: by: no column 'p_rms'"):
         ensemble_stats(pd.DataFrame(rows), pd.concat(curves), by="p_rms")
+    # a parameter set in some runs and unset (NaN) in others is a grouping column: under
+    # pandas 3 astype(str) kept NaN missing, so {NaN, 1.0} counted as one value and the
+    # two settings became one ensemble of 6 (a user's hunt)
+    mixed = pd.DataFrame(rows).assign(p_extent=[np.nan if r["p_rms_height"] == 1e-3 else 1.0 for r in rows])
+    split = ensemble_stats(mixed, pd.concat(curves))
+    assert list(split.columns[:3]) == ["p_rms_height", "p_extent", "n"] and split["n"].tolist() == [3, 3]
 
 
 def test_rough_campaign_files_expand():

@@ -281,29 +281,44 @@ def _column_list(names, what: str, table: pd.DataFrame) -> list[str]:
     return names
 
 
+def _distinct(values: pd.Series) -> int:
+    """How many different values a column holds, a missing one (None, NaN: an unset
+    optional parameter) counting as a value of its own. astype(str).nunique() left NaN
+    out under pandas 3, and runs with and without a parameter became one ensemble."""
+    return values.astype(object).where(values.notna(), "<missing>").astype(str).nunique()
+
+
 def kernel_slopes(summary: pd.DataFrame, value: str = "r_pull_off_force",
                   by: tuple[str, ...] = ("p_kernel", "p_alpha")) -> pd.DataFrame:
     """One spacing slope per group of a campaign summary (default: per kernel and alpha).
-    A group with two runs at one spacing is refused, naming the columns they differ in:
-    runs at other radii, self terms or seeds were pooled into one fit, silently."""
+
+    Refused, naming the group: two runs at one spacing (they differ in a parameter that
+    is not in ``by``, which is named: runs at other radii, self terms or seeds were pooled
+    into one fit), a value that is missing or not positive (no log), and a group with one
+    spacing; these used to be pooled or left out without a word."""
     rows = []
     by = _column_list(by, "kernel_slopes: by", summary)
-    for key, g in summary.groupby(by, sort=True):
+    _column_list([value, "p_spacing"], "kernel_slopes", summary)
+    for key, g in summary.groupby(by, sort=True, dropna=False):
+        group = dict(zip(by, key if isinstance(key, tuple) else (key,)))
         repeated = g[g["p_spacing"].duplicated(keep=False)]
         if len(repeated):
             differ = [c for c in g.columns if c.startswith("p_") and c not in by
-                      and repeated.groupby("p_spacing")[c].agg(lambda v: v.astype(str).nunique()).max() > 1]
-            group = dict(zip(by, key if isinstance(key, tuple) else (key,)))
+                      and repeated.groupby("p_spacing")[c].agg(_distinct).max() > 1]
             advice = (f"they differ in {', '.join(differ)}: give by={(*by, *differ)!r} for one fit each"
                       if differ else "they are one run repeated: drop the duplicates")
             raise ValueError(f"kernel_slopes: the group {group} has {len(repeated)} runs at "
                              f"{repeated['p_spacing'].nunique()} spacing(s); {advice}")
-        g = g[g[value] > 0]
-        if g["p_spacing"].nunique() < 2:
-            continue
+        bad = g[~(pd.to_numeric(g[value], errors="coerce") > 0)]
+        if len(bad):
+            raise ValueError(f"kernel_slopes: the group {group} has {len(bad)} run(s) whose {value} is missing "
+                             f"or not > 0 (spacings {', '.join(_fraction(h) for h in bad['p_spacing'])}): a "
+                             "power law has no log there; leave those rows out of the table first")
+        if len(g) < 2:
+            raise ValueError(f"kernel_slopes: the group {group} has one spacing only "
+                             f"({_fraction(g['p_spacing'].iloc[0])}): a slope needs two")
         fit = spacing_slope(g["p_spacing"], g[value])
-        key = key if isinstance(key, tuple) else (key,)
-        rows.append({**dict(zip(by, key)), "slope": fit.exponent, "stderr": fit.exponent_stderr,
+        rows.append({**group, "slope": fit.exponent, "stderr": fit.exponent_stderr,
                      "ci_low": fit.ci_low, "ci_high": fit.ci_high, "n": fit.n,
                      "spacings": ", ".join(_fraction(s) for s in sorted(g["p_spacing"], reverse=True))})
     return pd.DataFrame(rows)
@@ -641,7 +656,7 @@ def ensemble_stats(summary: pd.DataFrame, curves: pd.DataFrame, by=None,
              else _column_list(seeds, "ensemble_stats: seeds", table))
     if by is None:
         by = [c for c in table.columns if c.startswith("p_") and c not in seeds
-              and table[c].astype(str).nunique() > 1]
+              and _distinct(table[c]) > 1]
     by = _column_list(by, "ensemble_stats: by", table)
     rows = []
     groups = table.groupby(by, sort=True, dropna=False) if by else [((), table)]
