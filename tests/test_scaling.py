@@ -180,6 +180,27 @@ def test_the_fig6_coefficient_is_fitted_on_the_adhesive_runs_only():
     assert adhesive.half_width > fit_line(k ** 2, f, through_origin=True).half_width     # what it was
 
 
+def test_the_report_checks_each_preload_and_names_flagged_runs():
+    """REPORT.md said that every preload reaches sqrt(R δ_max) >= 1.2 a_c, typed in: the
+    quick kernel study has one at 0.996 a_c (a user's hunt), the full one a neighbors run
+    at 1.168. It now says which, from the tables, and names flagged runs."""
+    import pandas as pd
+    from types import SimpleNamespace
+
+    from tfm.paper.report import _flagged_text, _preload_text, preload_ratios
+
+    # K_eff = 0.32 (1/16)^0.5 = 0.08 -> a_c = 0.4816 (the hunter's hand check); sqrt(0.23) = 0.4796
+    h, k_th = 1 / 16, 0.32
+    rows = [dict(p_kernel="boussinesq", p_alpha=1.0, p_spacing=h, p_radius=1.0, r_f_th=k_th * h ** 2,
+                 r_max_indent=dmax, r_warnings=w) for dmax, w in ((0.23, ""), (0.5, "contact reached the grid edge"))]
+    run = SimpleNamespace(name="kernels", summary=pd.DataFrame(rows))
+    assert preload_ratios(run.summary).tolist() == pytest.approx([0.23 ** 0.5 / 0.4816, 0.5 ** 0.5 / 0.4816], rel=1e-3)
+    assert "but 1 of 2" in _preload_text({"k": run}) and "Δ = 1/16: 0.996)" in _preload_text({"k": run})
+    assert "kernels: 1 (contact reached the grid edge)" in _flagged_text({"k": run})
+    deep = SimpleNamespace(name="deep", summary=run.summary.iloc[1:].assign(r_warnings=""))
+    assert "the smallest is 1.469 a_c" in _preload_text({"d": deep}) and "No run is flagged" in _flagged_text({"d": deep})
+
+
 def fig3_run(offset: float, excess: float):
     """A Fig. 3 run object with a Hertz-like curve: loading P = d^1.5 at d = 0.001 ..
     0.05, unloading along its tangent at the top (the fixed-contact stiffness), plus

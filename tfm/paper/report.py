@@ -215,6 +215,52 @@ def _local_limit_text(excess) -> str:
     return " The excess does not fall steadily with the spacing in these runs, so they do not show the limit."
 
 
+#: the preload that shows the JKR pull-off: sqrt(R delta_max) >= this x a_c (docs/physics.md, §6)
+PRELOAD_OVER_AC = 1.2
+
+
+def preload_ratios(summary: pd.DataFrame) -> pd.Series:
+    """sqrt(R δ_max) / a_c of each adhesive run (F_th > 0), a_c the JKR critical radius of
+    its effective toughness."""
+    ad = summary[summary["r_f_th"] > 0]
+    k = theory.effective_toughness(ad["r_f_th"].to_numpy(), ad["p_spacing"].to_numpy())
+    a_c = np.array([theory.jkr_critical_radius(kk, r) for kk, r in zip(k, ad["p_radius"])])
+    return pd.Series(np.sqrt(ad["p_radius"].to_numpy() * ad["r_max_indent"].to_numpy()) / a_c, index=ad.index)
+
+
+def _preload_text(runs: dict) -> str:
+    """Whether every adhesive preload is as deep as the JKR pull-off needs, from the tables
+    (it was a sentence typed in, and false for some runs)."""
+    short, smallest, n = [], math.inf, 0
+    for r in runs.values():
+        ratios = preload_ratios(r.summary)
+        n += len(ratios)
+        if len(ratios):
+            smallest = min(smallest, float(ratios.min()))
+        for i in ratios.index[ratios < PRELOAD_OVER_AC]:
+            row = r.summary.loc[i]
+            short.append(f"{r.name} ({row['p_kernel']} kernel, α = {row['p_alpha']:g}, Δ = "
+                         f"{fraction_text(row['p_spacing'])}: {ratios[i]:.3f})")
+    if not n:
+        return ""
+    if not short:
+        return (f"Every adhesive preload is deeper than the JKR critical radius needs: sqrt(R δ_max) ≥ "
+                f"{PRELOAD_OVER_AC:g} a_c (docs/physics.md, §6); the smallest is {smallest:.3f} a_c.")
+    return (f"Every adhesive preload but {len(short)} of {n} is deeper than the JKR critical radius needs, "
+            f"sqrt(R δ_max) ≥ {PRELOAD_OVER_AC:g} a_c (docs/physics.md, §6); below it: {'; '.join(short)}.")
+
+
+def _flagged_text(runs: dict) -> str:
+    """The runs whose summary carries a warning (a flag), which the claims use like any other."""
+    flagged = {r.name: r.summary[r.summary["r_warnings"].fillna("") != ""] for r in runs.values()}
+    flagged = {name: f for name, f in flagged.items() if len(f)}
+    if not flagged:
+        return "No run is flagged (no warnings in any summary)."
+    parts = [f"{name}: {len(f)} ({'; '.join(sorted(set(f['r_warnings'])))[:300]})" for name, f in flagged.items()]
+    return (f"**Flagged runs** (their numbers are used in the claims below like the others; check them): "
+            f"{', '.join(parts)}.")
+
+
 def _link(target: Path, report: Path) -> str:
     """A Markdown link to ``target`` from the report's folder (which --out may move)."""
     return Path(os.path.relpath(Path(target).resolve(), Path(report).resolve().parent)).as_posix()
@@ -236,8 +282,8 @@ def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], 
         f"Units are the paper's (E* = 1/π, C_ij = 1/r_ij, self term {theory.PAPER_SELF_TERM:g}/Δ). Every body is a "
         "paraboloid of",
         "radius R (the paper's sphere at the small depths where Hertz and JKR apply). Every F_max is",
-        "quoted with its preload δ_max (see the tables), and every preload is deeper than the JKR",
-        "critical radius needs: sqrt(R δ_max) ≥ 1.2 a_c (docs/physics.md, §6).",
+        "quoted with its preload δ_max (see the tables).",
+        _preload_text(runs),
         "",
         "Beyond the paper: [the continuum limit of the pull-off coefficient]"
         f"({_link(REPO / 'results' / 'limit' / 'REPORT.md', path)}) (`make limit`).",
@@ -283,6 +329,7 @@ def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], 
     for r in runs.values():
         lines.append(f"| [`{r.name}`]({_link(r.path, path)}) | {r.n_runs} | {r.computed} | {r.seconds:.0f} | "
                      f"{r.description} |")
+    lines += ["", _flagged_text(runs)]
     lines += ["", "## The paper's claims beside tfm's values", "",
               "| where | claim | paper | tfm | agrees |", "|---|---|---|---|---|"]
     for c in res.claims:
