@@ -151,6 +151,23 @@ def test_si_load_step_is_checked_in_newtons(max_load, limit):
         Params.from_dict(values)
 
 
+def test_si_max_load_is_quoted_in_newtons():
+    """The messages about an SI max_load quoted it in F* (1e-7 N as 2.38732e-14, 5 N as
+    1.19366e-06, 1e-3 N as 2.38732e-10): the depth came from the paper-units twin, which
+    checked itself (a user's hunt)."""
+    base = dict(SI, spacing=6.8e-6, shape="paraboloid", control="force")
+    with pytest.raises(ParameterError, match=r"^step: must be <= the depth of max_load 1e-07 N \(1\.47e-08 m\), "
+                                             r"got 2e-08"):
+        Params.from_dict(dict(base, step=2e-8, max_load=1e-7))
+    with pytest.raises(ParameterError, match=r"^max_load: 5 N would press a sphere of radius 0\.001 in by 0\.00199"):
+        Params.from_dict(dict(base, shape="sphere", step=2e-8, max_load=5))
+    with pytest.raises(ParameterError, match=r"loading steps to the depth of max_load 0\.001 N: 6\.81e-06"):
+        check(Params.from_dict(dict(base, step=1e-6, max_load=1e-3)))
+    # the depth is the twin's: the Hertz depth of max_load / F*
+    p = Params.from_dict(dict(base, step=1e-8, max_load=1e-3))
+    assert p.delta_max == to_paper(p).delta_max
+
+
 def test_units_parameters_sweep_in_a_campaign():
     base = {k: v for k, v in SI.items() if k != "work_of_adhesion"}
     spec = spec_from_dict({"name": "u", "base": dict(base, spacing=R / 16, step=R * 1e-3, shape="paraboloid",

@@ -365,7 +365,9 @@ def check(p, memory: bool = True) -> list[str]:
     """Refuse a meaningless or oversized run (GuardError) unless allowed; return the
     notes to state before it starts. ``memory=False`` skips the machine-dependent part
     (campaign files are validated on one machine and may run on another)."""
-    from .units import to_paper
+    from .units import to_paper, unit_suffixes
+    newtons = unit_suffixes(p)[1]
+    given_load = p.max_load             # as the user gave it (newtons for SI), for the messages
     p = to_paper(p)                     # SI: the same lengths, forces in the paper's units
     allowed = _allowed(p)
     notes = []
@@ -391,7 +393,7 @@ def check(p, memory: bool = True) -> list[str]:
     steps = depth / p.step
     if steps < MIN_LOADING_STEPS * (1 - 1e-9):
         # under force control max_indent follows max_load: name what the user gave
-        where = ("the automatic preload depth" if auto else f"the depth of max_load {p.max_load:g}:"
+        where = ("the automatic preload depth" if auto else f"the depth of max_load {given_load:g}{newtons}:"
                  if p.control == "force" and p.max_load is not None else "max_indent")
         _guard(notes, allowed, "step", f"step: only {_below(steps, MIN_LOADING_STEPS)} loading steps to {where} {depth:.3g} "
                         f"(step {p.step:.3g}); "

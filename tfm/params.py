@@ -197,17 +197,17 @@ class Params:
         """The preload depth, resolving ``max_indent="auto"`` (under force control with an
         explicit max_load: the non-adhesive depth of that load, Hertz or the flat punch's,
         which sizes the grid)."""
-        if self.max_indent == "auto" and self.units == "si":
-            from .units import to_paper     # same lengths in paper units with L* = 1 m
-            # no load_step: the preload does not depend on it, and the twin would check it
-            # in paper units (this record checks it in newtons); nor a max_load that does
-            # not apply (displacement control), which the twin refused in paper units
-            keep = {} if self.control == "force" else {"max_load": None}
-            return to_paper(self, load_step=None, **keep).delta_max
         if (self.max_indent == "auto" and getattr(self, "max_load", None) is not None
                 and self.control == "force"):        # elsewhere max_load is refused, not used
             from .theory import preload_indent
-            return float(preload_indent(self.shape, self.max_load, self.radius))
+            from .units import force_scale      # theory is in paper units (SI: L* = 1 m)
+            load = self.max_load / force_scale(self) if self.units == "si" else self.max_load
+            return float(preload_indent(self.shape, load, self.radius))
+        if self.max_indent == "auto" and self.units == "si":
+            from .units import to_paper     # same lengths in paper units with L* = 1 m
+            # no load_step or max_load: the preload does not depend on them here, and the
+            # twin would check them in paper units (this record checks them in newtons)
+            return to_paper(self, load_step=None, max_load=None).delta_max
         if self.max_indent == "auto":
             from .theory import auto_max_indent
             return auto_max_indent(self)
@@ -671,7 +671,8 @@ def _validate(p: Params) -> None:
     # relations between parameters
     dmax = p.delta_max
     # under force control with a max_load the depth is that load's (Hertz or punch)
-    depth = (f"the depth of max_load {p.max_load:g} ({dmax:.3g})"
+    newtons = " N" if p.units == "si" else ""
+    depth = (f"the depth of max_load {p.max_load:g}{newtons} ({dmax:.3g})"
              if p.control == "force" and p.max_load is not None else f"max_indent ({dmax:g})")
     if p.step > dmax:
         raise ParameterError(f"step: must be <= {depth}, got {p.step!r}")
@@ -679,7 +680,7 @@ def _validate(p: Params) -> None:
         raise ParameterError(f"step: {depth} / step = {dmax / p.step:.3g} steps; must be <= {MAX_STEPS:g}")
     if p.shape == "sphere" and dmax >= p.radius:
         if p.control == "force" and p.max_load is not None:
-            raise ParameterError(f"max_load: {p.max_load:g} would press a sphere of radius {p.radius:g} in by "
+            raise ParameterError(f"max_load: {p.max_load:g}{newtons} would press a sphere of radius {p.radius:g} in by "
                                  f"{dmax:.3g} (its Hertz depth), deeper than its radius; lower max_load")
         raise ParameterError(f"max_indent: must be < radius ({p.radius:g}) for a sphere, got {dmax!r}")
     _check_map_covers(p)
@@ -963,4 +964,6 @@ def _validate_units(p: Params) -> None:
         raise ParameterError(f"spacing: must be < radius ({p.radius:g} m), got {p.spacing!r};{mixed}")
     dmax = p.delta_max           # its own errors name their parameter (not always a length)
     if p.step > dmax:
-        raise ParameterError(f"step: must be <= max_indent ({dmax:g} m), got {p.step!r};{mixed}")
+        depth = (f"the depth of max_load {p.max_load:g} N ({dmax:.3g} m)"
+                 if p.control == "force" and p.max_load is not None else f"max_indent ({dmax:g} m)")
+        raise ParameterError(f"step: must be <= {depth}, got {p.step!r};{mixed}")
