@@ -152,6 +152,29 @@ def test_snapshots_stop_before_the_disk_is_full_and_the_run_is_kept(tmp_path, mo
     assert f.snapshot(5)["force"] == pytest.approx(res.curve["force"].iloc[5], rel=1e-15)
 
 
+def test_events_already_in_the_file_keep_their_names_after_the_snapshots_stop(tmp_path, monkeypatch):
+    """Snapshots that stopped after the maximum load: that step was in the file (every
+    step was stored) but lost its max_load label, which is settled at the end, so `tfm
+    show --step max_load` found none (a user's hunt)."""
+    import shutil
+
+    import tfm.snapshots
+
+    real = shutil.disk_usage
+    calls = []
+
+    def filling(path):
+        calls.append(path)
+        return real(path)._replace(free=tfm.snapshots.DISK_RESERVE + (10**9 if len(calls) <= 30 else 0))
+
+    monkeypatch.setattr(tfm.snapshots.shutil, "disk_usage", filling)
+    path = tmp_path / "run.fields.nc"
+    with pytest.warns(tfm.RunWarning, match="field snapshots stopped at step 30"):
+        res = tfm.simulate(spacing=1 / 16, step=2e-3, snapshots=1, fields_path=path, **STANDARD)
+    top = int(res.curve["step"].iloc[res.curve["force"].to_numpy().argmax()])
+    assert top < 30 and Fields(path).event_step("max_load") == top
+
+
 def test_no_snapshots_no_file(tmp_path):
     res = tfm.simulate(spacing=1 / 16, step=2e-3, **STANDARD)
     assert res.fields_path is None

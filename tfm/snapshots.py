@@ -243,10 +243,11 @@ class SnapshotWriter:
 
     def _write(self, rec: dict, F, u, state, label: str) -> None:
         step = rec["step"]
-        if not self._room(step):
+        # a step already in the file only gains a label: that, and its event, also once
+        # the snapshots have stopped (the file's max_load step lost its name)
+        if step not in self._index and not self._room(step):
             return
-        label_event = label.split("_")[0] != "every"
-        if label_event:
+        if label.split("_")[0] != "every":
             self._events[label] = step
         if step in self._index:
             i = self._index[step]
