@@ -132,7 +132,13 @@ class StopRequest:
         """The remembered signal, to the handlers that were there before (raises
         KeyboardInterrupt for Ctrl-C, ends the process for SIGTERM's default)."""
         signum, self.signum = self.signum, None
+        dies = self._saved.get(signum) in (signal.SIG_DFL, None)
         self._restore()
+        if dies and signum != signal.SIGINT:
+            # the process ends without unwinding: the half-written snapshots (tens of MB
+            # each, hidden beside the table or in /tmp) would stay
+            from .snapshots import remove_live_temporaries
+            remove_live_temporaries()
         signal.raise_signal(signum)
 
 
