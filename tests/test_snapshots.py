@@ -148,6 +148,31 @@ def test_sigterm_leaves_no_half_written_snapshots(tmp_path):
         assert list(tmp_path.iterdir()) == [], list(tmp_path.iterdir())
 
 
+def test_unwritten_temporary_snapshots_go_when_the_process_exits(tmp_path):
+    """simulate(snapshots=...) without fields_path, its result never written: the file
+    stayed in /tmp after a normal exit, until a later run's clean-up an hour on (a user's
+    hunt). One that write_curve moved beside a table stays there."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).parents[1]
+    code = ("import tfm\n"
+            "res = tfm.simulate(spacing=1/16, step=2e-3, alpha=0.75, k_th=0.02, shape='paraboloid', max_indent=0.05,"
+            " snapshots='events')\n"
+            "print(res.fields_path)\n")
+    keep = code + f"res.write_curve({str(tmp_path / 'kept' / 'run.parquet')!r})\n"
+    (tmp_path / "kept").mkdir()
+    for variant in (code, keep):
+        proc = subprocess.run([sys.executable, "-c", variant], cwd=repo, capture_output=True, text=True,
+                              timeout=300, env={**os.environ, "PYTHONPATH": str(repo), "TMPDIR": str(tmp_path)})
+        assert proc.returncode == 0, proc.stderr
+        assert Path(proc.stdout.split()[-1]).parent == tmp_path                # it was a temporary file
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["kept"]          # the table's folder only
+    assert sorted(p.name for p in (tmp_path / "kept").iterdir()) == ["run.fields.nc", "run.parquet"]
+
+
 def test_snapshots_stop_before_the_disk_is_full_and_the_run_is_kept(tmp_path, monkeypatch):
     """A disk that fills during a run with snapshots: HDF5 raised thousands of errors in its
     destructors and the process died by segfault, with no table. Now the snapshots stop

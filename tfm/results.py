@@ -165,7 +165,9 @@ class RunResult:
                     if self._fields_stay:
                         shutil.copyfile(self.fields_path, tmp)
                     else:
+                        from .snapshots import UNCLAIMED
                         shutil.move(str(self.fields_path), tmp)
+                        UNCLAIMED.discard(Path(self.fields_path))
                 self.fields_path = dest
             self._fields_stay = True         # the table keeps its own
             extra["fields"] = dest.name

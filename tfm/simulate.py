@@ -59,7 +59,8 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
     an SI run; force = -sum(F), compressive positive, as in the curve table). With ``p.snapshots`` other than
     "none" the field snapshots stream to ``fields_path`` (NetCDF4, ``.nc``, tfm.snapshots),
     which ``RunResult.write_curve`` copies beside the curve; without a path they go to a
-    temporary file that it moves there.
+    temporary file that it moves there, and that is removed when the process exits if no
+    write_curve has (give ``fields_path`` to keep the snapshots without a table).
 
     ``checkpoint`` (a file path, displacement control without snapshots): the run's state
     is saved there every ``checkpoint_every`` seconds, a saved state of this run is
@@ -181,8 +182,10 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
         raise
     finally:
         if writer is not None:
-            from .snapshots import LIVE_TEMPORARIES
+            from .snapshots import LIVE_TEMPORARIES, UNCLAIMED
             LIVE_TEMPORARIES.discard(Path(fields_path))    # the result's from here on
+            if own_path:
+                UNCLAIMED.add(Path(fields_path))           # until write_curve moves it
     if summary["warnings"]:
         warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
     # a resumed run says so: the steps before this one were computed by an earlier process

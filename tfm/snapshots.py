@@ -33,6 +33,7 @@ in writing order: ``ds.sortby("step")`` orders it, ``ds.sel(step=k)`` picks a st
 """
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import shutil
@@ -56,6 +57,19 @@ DISK_RESERVE = 64 * 2**20
 # and the hidden .tmp a writer streams to): a campaign's pool worker stopped by SIGTERM
 # removes them before it dies (tfm.campaign.runner); they stayed in /tmp for an hour.
 LIVE_TEMPORARIES: set[Path] = set()
+
+
+# Finished runs' snapshots in the temporary folder that no RunResult.write_curve has
+# moved beside a table yet: removed when the process exits (they stayed in /tmp for an
+# hour, until a later run's clean-up, for every simulate() whose result was not written).
+UNCLAIMED: set[Path] = set()
+
+
+@atexit.register
+def _remove_unclaimed() -> None:
+    for path in list(UNCLAIMED):
+        Path(path).unlink(missing_ok=True)
+    UNCLAIMED.clear()
 
 
 def remove_live_temporaries() -> None:
