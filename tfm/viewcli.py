@@ -48,7 +48,8 @@ def register(sub) -> None:
     anim.add_argument("run", help="curve .parquet, a folder with one, or a campaign run id")
     anim.add_argument("-o", "--output", help="a .gif (Pillow) or .mp4 (needs ffmpeg); default <stem>.gif")
     anim.add_argument("--fps", type=float, default=DEFAULT_FPS,
-                      help=f"frames per second (default {DEFAULT_FPS:g}; 0.01 to 100 for a GIF, at least 0.01 for MP4)")
+                      help=f"frames per second (default {DEFAULT_FPS:g}; 0.01 to {GIF_MAX_FPS:g} for a GIF, which viewers "
+                           "play at 10 fps above that; at least 0.01 for MP4)")
     anim.add_argument("--all-phases", action="store_true", help="loading too, not only the unloading")
     _overwrite_flag(anim)
     anim.set_defaults(func=cmd_animate)
@@ -303,10 +304,11 @@ ANIMATION_SUFFIXES = (".gif", ".mp4")
 # every default run)
 DEFAULT_FPS = 10.0
 
-# A GIF stores frame durations in whole centiseconds (gif_centiseconds): above 100 fps a
-# frame would last 0, which viewers replace by their own default; the longest it can store
-# is 655.35 s. Below 0.01 fps (100 s a frame) nothing is an animation.
-GIF_MAX_FPS = 100.0
+# A GIF stores frame durations in whole centiseconds (gif_centiseconds), and browsers and
+# most viewers play a frame of 0 or 1 cs at 10 cs: above 50 fps (2 cs) a GIF played at
+# 10 fps, without a word; the longest it can store is 655.35 s. Below 0.01 fps (100 s a
+# frame) nothing is an animation.
+GIF_MAX_FPS = 50.0
 MIN_FPS = 0.01
 
 
@@ -316,7 +318,9 @@ def check_fps(fps: float, out) -> None:
     gif = Path(out).suffix.lower() == ".gif"
     if not (fps >= MIN_FPS and math.isfinite(fps)) or (gif and fps > GIF_MAX_FPS):
         allowed = f"{MIN_FPS:g} <= fps <= {GIF_MAX_FPS:g} for a GIF" if gif else f"a finite fps >= {MIN_FPS:g}"
-        raise ViewError(f"--fps {fps:g}: expected {allowed}")
+        faster = (" (viewers play faster GIF frames at 10 fps; an .mp4 takes any rate)"
+                  if gif and math.isfinite(fps) and fps > GIF_MAX_FPS else "")
+        raise ViewError(f"--fps {fps:g}: expected {allowed}{faster}")
 
 
 def animate(fields, curve, params, out, fps: float = DEFAULT_FPS, unload_only: bool = True, dpi: int = 110) -> int:
