@@ -84,10 +84,43 @@ def test_fits_give_exact_data_back():
     # two seeds at 1/32: no ratio between them
     (convergence_ratios, ([1 / 32, 1 / 32, 1 / 64], [1.0, 1.1, 1.2]), "spacing repeats: 1/32.*average"),
     (convergence_ratios, ([1 / 32, 1 / 64], [1.0, 0.0]), "> 0"),
+    # one spacing written two ways gave a local slope of -6219 (a user's hunt)
+    (convergence_ratios, ([1 / 48, 0.0208333, 1 / 96], [0.0100, 0.0101, 0.0098]),
+     "differ by 1.6e-06 .*one spacing written two ways"),
+    # a 2-D array was flattened into one fit of 4 points
+    (fit_power_law, (np.ones((2, 2)) * [1, 2], np.ones((2, 2))), r"one-dimensional, got shape \(2, 2\)"),
 ])
 def test_fits_refuse_what_determines_no_answer(fit, args, match):
     with pytest.raises(ValueError, match=match):
         fit(*args)
+
+
+def test_curve_metrics_follow_the_steps_not_the_row_order():
+    """hysteresis and hertz_errors read the rows in the order given: a shuffled curve gave
+    hysteresis 0.009 instead of 0.006 and the "deepest" indent 0.006 instead of 0.02 (a
+    user's hunt)."""
+    import pandas as pd
+
+    from tfm.analysis import hertz_errors, hysteresis
+
+    res = simulate(spacing=1 / 16, k_th=0.02, shape="paraboloid", max_indent=0.05, step=2e-3)
+    curve = res.curve
+    shuffled = curve.sample(frac=1.0, random_state=3)
+    assert not shuffled["step"].is_monotonic_increasing
+    assert hysteresis(shuffled) == hysteresis(curve)
+    assert hertz_errors(shuffled, 1.0, 1 / 16) == hertz_errors(curve, 1.0, 1 / 16)
+    assert hertz_errors(curve, 1.0, 1 / 16)["indent"] == pytest.approx(0.05)
+
+
+def test_fits_take_numpy_confidences_and_theory_takes_arrays():
+    """confidence=np.float32(0.9) was refused as "must be in (0, 1)", np.float64 accepted;
+    kendall_force of an array raised TypeError, where the other references take arrays."""
+    x, y = [1.0, 2.0, 4.0], [1.0, 4.1, 15.9]
+    assert fit_power_law(x, y, confidence=np.float32(0.9)).ci_low == pytest.approx(
+        fit_power_law(x, y, confidence=0.9).ci_low, rel=1e-6)        # float32 holds 0.9 to 1e-8
+    radii = np.array([0.1, 0.2])
+    assert theory.kendall_force(radii, 0.01) == pytest.approx([theory.kendall_force(r, 0.01) for r in radii],
+                                                              rel=1e-15)
 
 
 def test_convergent_alpha_without_a_significant_gradient_has_no_interval():

@@ -16,6 +16,7 @@ Pure functions on arrays and DataFrames; nothing here runs a simulation or write
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -93,7 +94,7 @@ class LineFit(_Interval):
 
 def _check_confidence(confidence, who: str) -> None:
     """A confidence level is a probability: 95 for 0.95 gave NaN intervals, without a word."""
-    if isinstance(confidence, bool) or not isinstance(confidence, (int, float)) or not 0.0 < confidence < 1.0:
+    if isinstance(confidence, bool) or not isinstance(confidence, numbers.Real) or not 0.0 < confidence < 1.0:
         raise ValueError(f"{who}: confidence must be in (0, 1), e.g. 0.95, got {confidence!r}")
 
 
@@ -110,6 +111,8 @@ def _clean(x, y, who: str, names: tuple[str, str] = ("x", "y")):
     y = np.asarray(y, dtype=float)
     if x.shape != y.shape:
         raise ValueError(f"{who}: {names[0]} and {names[1]} must have the same shape, got {x.shape} and {y.shape}")
+    if x.ndim > 1:                       # a table's columns given as a 2-D array were flattened into one fit
+        raise ValueError(f"{who}: {names[0]} and {names[1]} must be one-dimensional, got shape {x.shape}")
     for name, v in zip(names, (x, y)):
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
@@ -192,6 +195,11 @@ def spacing_slope(spacing, f_max, confidence: float = CONFIDENCE) -> PowerLawFit
     return fit_power_law(spacing, f_max, confidence)
 
 
+#: the smallest relative step between two spacings that convergence_ratios takes as a
+#: refinement (the finest studies halve or take cube roots of 2: 26 %)
+MIN_SPACING_STEP = 0.01
+
+
 def convergence_ratios(spacing, values) -> pd.DataFrame:
     """Successive refinement ratios: F(finer)/F(coarser) and the local slope between them.
 
@@ -206,6 +214,12 @@ def convergence_ratios(spacing, values) -> pd.DataFrame:
         dup = ", ".join(f"{fraction_text(x)} ({c} values)" for x, c in zip(uniq, counts) if c > 1)
         raise ValueError(f"convergence_ratios: spacing repeats: {dup}; average the runs at one spacing "
                          "(e.g. over seeds) first")
+    # two spacings a rounding apart (1/48 and 0.0208333) gave a local slope of -6219
+    close = np.flatnonzero(uniq[1:] / uniq[:-1] < 1 + MIN_SPACING_STEP)
+    if close.size:
+        a, b = uniq[close[0]], uniq[close[0] + 1]
+        raise ValueError(f"convergence_ratios: spacings {a!r} and {b!r} differ by {b / a - 1:.2g} (relative), "
+                         f"less than {MIN_SPACING_STEP:g}: one spacing written two ways? Their ratio has no slope")
     order = np.argsort(-s)
     s, v = s[order], v[order]
     rows = []
@@ -331,6 +345,7 @@ def hertz_errors(curve: pd.DataFrame, radius: float, spacing: float, min_fractio
     error in spacings."""
     from .theory import hertz_force, hertz_radius
 
+    curve = in_step_order(curve)
     load = curve[curve["phase"] == "load"]
     load = load[load["indent"] > 0]
     if load.empty:
@@ -603,6 +618,14 @@ def plateau(x, y, confidence: float = CONFIDENCE) -> Plateau:
 SEED_COLUMNS = ("p_roughness_seed", "p_disorder_seed", "p_seed")     # p_seed: the jittered layout's
 
 
+def in_step_order(curve: pd.DataFrame) -> pd.DataFrame:
+    """The curve's rows in the order of its steps: a path integral or "the deepest
+    loading step" of rows in another order (a user's sort, a sample) was silently wrong."""
+    if "step" in curve.columns and not curve["step"].is_monotonic_increasing:
+        return curve.sort_values("step", kind="stable")
+    return curve
+
+
 def hysteresis(curve: pd.DataFrame) -> float:
     """Energy dissipated over the load-unload cycle: the area between the loading and
     unloading curves, the integral of P d(delta) along the whole path from first contact
@@ -611,6 +634,7 @@ def hysteresis(curve: pd.DataFrame) -> float:
     displacement control), so the loop closes with a drop at the jump: under force control
     the part of the unloading branch past the largest tension is never followed, and the
     hysteresis is smaller than under displacement control (1/64: 7.6e-5 against 1.25e-4)."""
+    curve = in_step_order(curve)
     delta = np.concatenate([[0.0], curve["indent"].to_numpy(dtype=float)])
     force = np.concatenate([[0.0], curve["force"].to_numpy(dtype=float)])
     return float(np.sum(0.5 * (force[1:] + force[:-1]) * np.diff(delta)))

@@ -79,7 +79,7 @@ def jkr_critical_radius(k_ic, radius):
 
 def kendall_force(a, gamma):
     """Kendall's pull-off force of a flat punch of radius a."""
-    return math.sqrt(8.0 * math.pi * a ** 3 * E_STAR * gamma)
+    return np.sqrt(8.0 * math.pi * np.asarray(a) ** 3 * E_STAR * gamma)     # arrays too, as the others
 
 
 def winkler_pull_off(c_w, sigma_th, radius):
