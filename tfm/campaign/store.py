@@ -383,12 +383,12 @@ class CampaignStore:
     def tables_behind(self, spec: CampaignSpec, status: Status | None = None) -> str | None:
         """Why the tables do not hold the stored runs as they are now (None: they do)."""
         record = self._record(spec, status or self.status(spec))
+        if self._tables_current(record):
+            return None
         try:
             written = read_metadata(self.table_path("summary")).get("campaign")
         except (OSError, ValueError):
             written = None
-        if self._tables_current(record):
-            return None
         if not isinstance(written, dict):
             return "no readable summary table"
         if written.get("sha256") != record["sha256"]:
