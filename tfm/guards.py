@@ -256,12 +256,10 @@ def _status_bytes(key: str) -> float:
     return 0.0
 
 
-# The direct sum's cost: every pair of springs, in more CG iterations as the spacing
-# shrinks, about N^2.5 in all. Measured on the standard curve (paraboloid R = 1, K_th 0.02,
-# max_indent 0.05, step 2.5e-4) at spacing 1/256, 25,281 springs: 338 s on the 2-core VM
-# with 2 threads (2026-11-25; 1/128 took 8.5-25 s, 1/64 0.3-2.4 s on that noisy machine).
-# The direct sum's time, scaled from one measured curve: the standard curve at spacing
-# 1/256 (25,281 springs), 338 s on the 2-core VM with 2 threads (2026-11-24).
+# The direct sum's time, scaled from one measured curve (_direct_work): the standard curve
+# (paraboloid R = 1, K_th 0.02, max_indent 0.05, step 2.5e-4) at spacing 1/256, 25,281
+# springs, 338 s on the 2-core VM with 2 threads (1/128 took 8.5-25 s, 1/64 0.3-2.4 s on
+# that noisy machine).
 DIRECT_REFERENCE = dict(spacing=1 / 256, k_th=0.02, f_th=None, shape="paraboloid", max_indent=0.05,
                         step=2.5e-4, operator="direct")
 DIRECT_REFERENCE_SECONDS = 338.0
