@@ -671,16 +671,14 @@ def _validate(p: Params) -> None:
     # relations between parameters
     dmax = p.delta_max
     # under force control with a max_load the depth is that load's (Hertz or punch)
-    newtons = " N" if p.units == "si" else ""
-    depth = (f"the depth of max_load {p.max_load:g}{newtons} ({dmax:.3g})"
-             if p.control == "force" and p.max_load is not None else f"max_indent ({dmax:g})")
+    depth = _depth_text(p, dmax)
     if p.step > dmax:
         raise ParameterError(f"step: must be <= {depth}, got {p.step!r}")
     if dmax / p.step > MAX_STEPS:
         raise ParameterError(f"step: {depth} / step = {dmax / p.step:.3g} steps; must be <= {MAX_STEPS:g}")
     if p.shape == "sphere" and dmax >= p.radius:
         if p.control == "force" and p.max_load is not None:
-            raise ParameterError(f"max_load: {p.max_load:g}{newtons} would press a sphere of radius {p.radius:g} in by "
+            raise ParameterError(f"max_load: {p.max_load:g}{' N' if p.units == 'si' else ''} would press a sphere of radius {p.radius:g} in by "
                                  f"{dmax:.3g} (its Hertz depth), deeper than its radius; lower max_load")
         raise ParameterError(f"max_indent: must be < radius ({p.radius:g}) for a sphere, got {dmax!r}")
     _check_map_covers(p)
@@ -890,6 +888,15 @@ def _validate_surface_relations(p: Params) -> None:
                                  "give a shorter long_cutoff or leave rolloff at 1")
 
 
+def _depth_text(p: Params, dmax: float) -> str:
+    """The preload depth as messages name it: max_indent, or, under force control, the
+    depth of max_load as the user gave it (newtons and metres for an SI record)."""
+    length, force = (" m", " N") if p.units == "si" else ("", "")
+    if p.control == "force" and p.max_load is not None:
+        return f"the depth of max_load {p.max_load:g}{force} ({dmax:.3g}{length})"
+    return f"max_indent ({dmax:g}{length})"
+
+
 def _check_map_covers(p: Params) -> None:
     """A height map covers the grid (before the spacing is checked against the grid: a
     map too small for one spring a side is the map's fault, not the spacing's)."""
@@ -964,6 +971,4 @@ def _validate_units(p: Params) -> None:
         raise ParameterError(f"spacing: must be < radius ({p.radius:g} m), got {p.spacing!r};{mixed}")
     dmax = p.delta_max           # its own errors name their parameter (not always a length)
     if p.step > dmax:
-        depth = (f"the depth of max_load {p.max_load:g} N ({dmax:.3g} m)"
-                 if p.control == "force" and p.max_load is not None else f"max_indent ({dmax:g} m)")
-        raise ParameterError(f"step: must be <= {depth}, got {p.step!r};{mixed}")
+        raise ParameterError(f"step: must be <= {_depth_text(p, dmax)}, got {p.step!r};{mixed}")
