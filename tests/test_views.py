@@ -175,6 +175,22 @@ def test_jkr_scaling_axis_has_no_overlapping_ticks():
     assert _ticks_overlap(fig) == []
 
 
+def test_ratio_axes_of_about_a_decade_read_as_plain_numbers():
+    """The kernel study's F_max ratio axes (0.25-4) were labelled 3×10⁻¹, 2×10⁰, 4×10⁰:
+    Matplotlib's minor-tick labels on a log axis spanning about one decade."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig, (ax,) = plots.figure()
+    ax.loglog([1 / 128, 1 / 32], [0.25, 3.6])
+    plots.plain_log_ticks(ax.yaxis)
+    FigureCanvasAgg(fig).draw()
+    lo, hi = ax.get_ylim()
+    labels = {t.get_text() for t in ax.yaxis.get_majorticklabels() + ax.yaxis.get_minorticklabels()
+              if t.get_text() and lo <= t.get_position()[1] <= hi}
+    assert {"1", "2", "3", "0.3"} <= labels, labels
+    assert not any("times" in t or "^" in t or "e" in t for t in labels), labels
+
+
 @pytest.fixture(scope="module")
 def stored_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("views") / "curve.parquet"

@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib import rc_context
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator, ScalarFormatter
+from matplotlib.ticker import LogFormatter, MaxNLocator, ScalarFormatter
 
 from . import theory
 from .units import force_scale, unit_suffixes
@@ -80,6 +80,20 @@ def tidy_ticks(*axes, nbins=5):
             fmt = ScalarFormatter(useMathText=True)
             fmt.set_powerlimits((-2, 3))
             axis.set_major_formatter(fmt)
+
+
+class _PlainLogFormatter(LogFormatter):
+    """Log-axis labels as plain numbers (0.3, 2, 4) rather than 3×10⁻¹: the ratio axes
+    span about one decade, where Matplotlib labels minor ticks in scientific notation."""
+
+    def _num_to_string(self, x, vmin, vmax):
+        return f"{x:g}"
+
+
+def plain_log_ticks(axis):
+    """Plain-number labels on a log ``axis`` (major and the minor ticks Matplotlib labels)."""
+    axis.set_major_formatter(_PlainLogFormatter(labelOnlyBase=False))
+    axis.set_minor_formatter(_PlainLogFormatter(labelOnlyBase=False, minor_thresholds=(2, 0.5)))
 
 
 def fraction_ticks(ax, spacings):
@@ -772,6 +786,7 @@ def plot_kernel_study(summary, slopes, crossings, path=None, title=None):
                       color=cmap(i / max(1, len(alphas) - 1)), label=f"$\\alpha$ = {alpha:g}")
         ax.axhline(1.0, color="0.6", lw=0.6)
         fraction_ticks(ax, spacings)
+        plain_log_ticks(ax.yaxis)
         ax.set_xlabel("spacing $\\Delta$")
         ax.set_ylabel("$F_{max}$ / $F_{max}$(coarsest)")
         ax.set_title(f"{kernel} kernel")
