@@ -33,7 +33,8 @@ PARAM_HELP = {
     "layout": "square | hexagonal | jittered",
     "jitter": "layout=jittered: offsets in spacings, [0, 0.5)",
     "seed": "layout=jittered: random seed",
-    "max_indent": "preload delta_max, or auto (deep enough for the JKR pull-off)",
+    "max_indent": "preload delta_max, or auto: (1.5 a_c)^2/R (a_c the JKR critical radius), or twice the Winkler depth "
+                  "at F_th for the local and neighbors kernels",
     "step": "dilatation step",
     "snap_rule": "batch (the paper) | single",
     "tol": "relative residual of the contact solve",
@@ -53,7 +54,7 @@ PARAM_HELP = {
     "rms_height": "roughness: rms height (give it or rms_slope)",
     "short_cutoff": "roughness: shortest wavelength (default 4 spacings; >= 2)",
     "long_cutoff": "roughness: longest self-affine wavelength (default: the grid side)",
-    "rolloff": "roughness: PSD below long_cutoff = rolloff^2 C(q_L)",
+    "rolloff": "roughness: PSD at wavelengths longer than long_cutoff (q < q_L) = rolloff^2 C(q_L)",
     "roughness_seed": "roughness: random seed",
     "height_map": "shape=height_map: path to a .npy of heights (other formats: tfm[topography])",
     "map_pixel_size": "shape=height_map: pixel size (default: the file's, else spacing)",

@@ -413,7 +413,7 @@ def check(p, memory: bool = True) -> list[str]:
         notes.append(f"theta: {p.theta:g} is loose: the tree's error bound is {tree_error_bound(p.theta):.2g} of "
                      f"sum |f|/r at each target ({tree_error_bound(0.5):.2g} at 0.5), and snap decisions follow "
                      "it (theta 1 against the direct sum, spacing 1/48: the pull-off indent 18 steps off); "
-                     f"theta <= {LOOSE_THETA:g} kept the pull-off within 1e-5")
+                     f"theta <= {LOOSE_THETA:g} kept the pull-off within 5e-6")
     slope = surface_rms_slope(p)
     if slope > MAX_RMS_SLOPE:
         is_map = p.shape == "height_map"

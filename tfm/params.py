@@ -136,7 +136,7 @@ class Params:
     rms_height: float = 0.0             # or its rms height (give one of the two)
     short_cutoff: float | None = None   # lambda_s; None = 4 spacings
     long_cutoff: float | None = None    # lambda_L; None = the grid side (no roll-off)
-    rolloff: float = 1.0                # PSD below q_L = rolloff^2 C(q_L)
+    rolloff: float = 1.0                # PSD at q < q_L (longer than long_cutoff) = rolloff^2 C(q_L)
     roughness_seed: int = 0
     # measured topography: shape="height_map"
     height_map: str | None = None       # path to a .npy (or, with tfm[topography], any
@@ -588,8 +588,8 @@ def _choice(name: str, value: Any, allowed: tuple[str, ...]) -> None:
 
 
 #: largest opening angle of the tree without a warning: its error bound is 0.088 of sum |f|/r
-#: there (1.03 at 1), and against the direct sum the pull-off moved by 7e-6 at theta 0.7 and
-#: by 0.4 % (jittered, 1/64) or 18 steps of pull-off indent (square, 1/48) at theta 1
+#: there (1.03 at 1), and against the direct sum the pull-off moved by at most 4.6e-6 at
+#: theta 0.7 and by 9.2e-4, its indent 18 steps (square, 1/48), at theta 1 (bench.tree_pull_off)
 LOOSE_THETA = 0.7
 
 #: smallest tol: double precision rounds a force to 1.1e-16 of itself, so no solution's
@@ -791,7 +791,7 @@ def _validate_surface(p: Params) -> None:
             raise ParameterError(f"short_cutoff: must be < long_cutoff ({p.long_cutoff:g}), got {short!r}"
                                  + ("" if p.short_cutoff is not None else " (the default, 4 spacings)"))
     if _finite("rolloff", p.rolloff) < 0:
-        raise ParameterError(f"rolloff: must be >= 0 (PSD below long_cutoff = rolloff^2 C(q_L)), got {p.rolloff!r}")
+        raise ParameterError(f"rolloff: must be >= 0 (PSD at wavelengths longer than long_cutoff = rolloff^2 C(q_L)), got {p.rolloff!r}")
     _integer("roughness_seed", p.roughness_seed, 0, MAX_SEED)
     # under force control with a max_load, 'auto' is that load's depth (it sizes the grid)
     by_load = p.control == "force" and p.max_load is not None
