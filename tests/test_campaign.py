@@ -1066,7 +1066,7 @@ def test_status_says_when_the_campaign_file_was_edited(tmp_path, capsys):
     killed process or of a copy (a user's hunt)."""
     toml = _toml_of(_tiny("edited"), tmp_path)
     assert tfm_main(["campaign", "run", str(toml), "-q", "--results-dir", str(tmp_path)]) == 0
-    toml.write_text(toml.read_text().replace("alpha = [0.5, 0.75]", "alpha = [0.5, 0.75, 1.0]"))
+    toml.write_text(toml.read_text().replace("alpha = [0.5, 0.75]", "alpha = [0.5, 0.75, 0.625]"))
     capsys.readouterr()
     assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out

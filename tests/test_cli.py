@@ -171,7 +171,7 @@ def test_default_output_is_named_by_run_id_so_runs_do_not_clobber(tmp_path, monk
 
 
 SMALL_SI = ["--units", "si", "--youngs-modulus", "1e6", "--poisson-ratio", "0.5", "--work-of-adhesion", "0.05",
-            "--radius", "1e-3", "--shape", "paraboloid", "--spacing", "3.125e-5", "--max-indent", "2e-5",
+            "--radius", "1e-3", "--shape", "paraboloid", "--spacing", "2.4e-5", "--max-indent", "2e-5",
             "--step", "1e-6", "-q"]
 
 

@@ -234,9 +234,9 @@ def test_a_threshold_override_clears_the_other_one_for_a_dict_as_for_a_record():
     from pathlib import Path
 
     as_dict = dict(spacing="1/16", k_th=0.02, step=2e-3, max_indent=0.05, shape="paraboloid")
-    via_dict = tfm.simulate(as_dict, f_th=1e-5).params
-    assert via_dict == tfm.simulate(Params.from_dict(as_dict), f_th=1e-5).params
-    assert via_dict.k_th is None and via_dict.f_th == 1e-5
+    via_dict = tfm.simulate(as_dict, f_th=2e-4).params         # a_c = 2.3 spacings: resolved
+    assert via_dict == tfm.simulate(Params.from_dict(as_dict), f_th=2e-4).params
+    assert via_dict.k_th is None and via_dict.f_th == 2e-4
     with pytest.raises(ParameterError, match="expected a tfm.Params or a dict of parameters, got PosixPath"):
         tfm.simulate(Path("run.toml"))
 

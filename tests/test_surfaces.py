@@ -563,6 +563,31 @@ def test_a_steep_surface_is_flagged_before_the_run(tmp_path):
                                                           step=1e-3, rms_slope=2.0))))
 
 
+def test_a_steep_surface_given_by_its_rms_height_is_flagged(tmp_path):
+    """The steepness flag read rms_slope only: an rms_height of 0.1 at 1/32 (spectral rms
+    slope 1.5) ran with no word, and so did roughness added to a height map. The slope is
+    the realization's own, as spectral_rms_slope measures it on the synthesized grid."""
+    from tfm import guards
+    from tfm.surfaces import fourier_synthesis, grid_side, spectral_rms_slope
+
+    kw = dict(shape="paraboloid", f_th=0.0, spacing=1 / 32, extent=0.5, max_indent=0.05, step=1e-3)
+    p = Params.from_dict(dict(kw, rms_height=0.1))
+    h = fourier_synthesis(grid_side(p), p.spacing, p.hurst, rms_height=0.1, seed=0)
+    expected = spectral_rms_slope(h, p.spacing)
+    assert expected > 1.0
+    assert guards.surface_rms_slope(p) == pytest.approx(expected, rel=1e-12)     # the same surface
+    assert any(n.startswith(f"rms_height: the 0.1 rms height surface's rms slope is {expected:.3g}, steeper")
+               for n in guards.check(p, memory=False))
+    # scaled down tenfold: the same surface, a tenth of the slope, no flag
+    assert not any("rms slope" in n for n in guards.check(p.replace(rms_height=0.01), memory=False))
+    # a flat map with roughness on top: the roughness' slope counts
+    flat = _map(tmp_path, "flat.npy", array=np.zeros((65, 65)))
+    mk = dict(shape="height_map", height_map=flat, map_pixel_size=1 / 64, spacing=1 / 64, f_th=0.0,
+              max_indent=0.05, step=1e-3)
+    assert any(n.startswith("height_map and roughness: their combined rms slope is 3, steeper")
+               for n in guards.check(Params.from_dict(dict(mk, rms_slope=3.0)), memory=False))
+
+
 def _topography(tmp_path, name, heights, size, unit):
     st = pytest.importorskip("SurfaceTopography")
     path = str(tmp_path / name)

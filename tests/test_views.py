@@ -36,7 +36,7 @@ def _ticks_overlap(fig):
 
 CASES = {
     # the default run's shape at a test-sized spacing; explicit F_th
-    "sphere": dict(spacing=1 / 32, step=1e-3, max_indent=0.05),
+    "sphere": dict(spacing=1 / 40, step=1e-3, max_indent=0.05),        # a_c = 3 spacings
     # the flat punch R = 0.3
     "flat_punch": dict(spacing=1 / 32, shape="flat_punch", radius=0.3, max_indent=0.01, step=1e-4),
     # the hexagonal layout with the tree operator at 1/64

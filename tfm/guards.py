@@ -8,7 +8,10 @@ and returns notes to state before the run (a capped automatic preload).
 Each threshold was measured on the paraboloid pull-off (R = 1, K_th = 0.02,
 alpha = 0.75, max_indent = 0.05; reference 3.19e-3 at spacing 1/256):
 
-- ``coarse``: springs across the contact radius at maximum load, a / spacing. The
+- ``coarse``: springs across the contact radius at maximum load, a / spacing, and for
+  an adhesive sphere on the elastic kernel across the JKR critical radius a_c, where its
+  contact breaks (on the standard curve a_c = 0.86 a; an SI sphere of 1 mm at a_c / spacing
+  1.5 gave twice JKR's pull-off, a 1 m one at 0.32 a pull-off of 0, without a word). The
   pull-off error was +3 % at 29 springs, +8 % at 14, +19 % at 7, +43 % at 3.6 and
   +65 % at 2.7 (about 1.3 spacing / a: inaccurate but meaningful), then +53 % at 1.8,
   +92 % at 1.3, +170 % at 0.9, -15 % at 0.67 and 0 when one spring touches: below 2
@@ -52,7 +55,8 @@ MAX_RMS_SLOPE = 1.0
 
 # guard name -> the parameter it names and what it protects (``allow`` takes the names)
 GUARDS = {
-    "coarse": "spacing: fewer than 2 springs across the contact radius at maximum load",
+    "coarse": "spacing: fewer than 2 springs across the contact radius at maximum load, or across the "
+              "JKR critical radius a_c of an adhesive sphere",
     "step": "step: fewer than 10 loading steps (step > max_indent / 10)",
     "tol": "tol: looser than 1e-6, so snap and entry decisions depend on the solver error",
     "memory": "spacing/extent: the estimated peak memory exceeds the memory available",
@@ -87,14 +91,26 @@ def _guard(notes: list, allowed: set, guard: str, message: str) -> None:
     notes.append(f"allowed past the {guard!r} guard: {message}")
 
 
+def _breaks_at_critical_radius(p) -> bool:
+    """An adhesive sphere or paraboloid on the elastic kernel: its contact breaks near the
+    JKR critical radius a_c, which can be far smaller than the contact at the preload."""
+    return p.kernel == "boussinesq" and p.shape in ("sphere", "paraboloid") and p.threshold_force > 0
+
+
 def surface_rms_slope(p) -> float:
-    """The rms slope of the body's roughness: ``rms_slope`` as given, or a height map's
-    own (tfm.surfaces.map_rms_slope); 0 otherwise (the smooth bodies' slopes are those of
-    their radius)."""
+    """The rms slope of the body's roughness: ``rms_slope`` as given, that of the surface an
+    ``rms_height`` makes, a height map's own (tfm.surfaces.map_rms_slope), and for a map
+    with roughness added both in quadrature (independent slopes); 0 for a smooth body (its
+    slopes are those of its radius). An rms_height of 0.032 at 1/64 made slopes of 1.15
+    that were taken for 0."""
+    slope2 = 0.0
     if p.shape == "height_map":
         from .surfaces import load_height_map, map_rms_slope
-        return map_rms_slope(p, load_height_map(p.height_map))
-    return float(p.rms_slope)
+        slope2 += map_rms_slope(p, load_height_map(p.height_map)) ** 2
+    if p.rms_slope > 0 or p.rms_height > 0:
+        from .surfaces import roughness_rms_slope
+        slope2 += roughness_rms_slope(p) ** 2
+    return math.sqrt(slope2)
 
 
 # ---- estimates (no NumPy needed: cheap enough for a million-run campaign) -----------
@@ -364,7 +380,7 @@ def check(p, memory: bool = True) -> list[str]:
     notes to state before it starts. ``memory=False`` skips the machine-dependent part
     (campaign files are validated on one machine and may run on another)."""
     from .units import to_paper, unit_suffixes
-    newtons = unit_suffixes(p)[1]
+    metres, newtons = unit_suffixes(p)
     given_load = p.max_load             # as the user gave it (newtons for SI), for the messages
     p = to_paper(p)                     # SI: the same lengths, forces in the paper's units
     allowed = _allowed(p)
@@ -377,6 +393,16 @@ def check(p, memory: bool = True) -> list[str]:
                           f"load (a ~ {a:.3g}, spacing {p.spacing:.3g}); below "
                           f"{MIN_SPRINGS_ACROSS_RADIUS:g} the pull-off is erratic (errors of 50 to 170 %; "
                           "one touching spring gives a pull-off of 0). Refine the spacing or preload deeper")
+    elif _breaks_at_critical_radius(p):
+        from .theory import run_critical_radius
+        a_c = run_critical_radius(p)
+        across = a_c / p.spacing
+        if across < MIN_SPRINGS_ACROSS_RADIUS:
+            _guard(notes, allowed, "coarse", f"spacing: only {_below(across, MIN_SPRINGS_ACROSS_RADIUS, 2)} springs "
+                   f"across the JKR critical radius a_c = {a_c:.3g}{metres}, where the contact breaks "
+                   f"(spacing {p.spacing:.3g}); below {MIN_SPRINGS_ACROSS_RADIUS:g} the pull-off is erratic "
+                   "(1.5 springs: twice JKR's; 0.32: a pull-off of 0, one spring's threshold above JKR's "
+                   "whole force). Refine the spacing")
     # An automatic preload is never shallower than 10 steps, so against it a coarse step
     # could never be refused; it is measured against the depth the physics asks for (1/64,
     # step 0.05: the preload went 6x deeper, pull-off -17 %). A flat punch's pull-off does
@@ -417,7 +443,13 @@ def check(p, memory: bool = True) -> list[str]:
     slope = surface_rms_slope(p)
     if slope > MAX_RMS_SLOPE:
         is_map = p.shape == "height_map"
-        whose = "height_map: the map's" if is_map else "rms_slope: the requested"
+        if is_map:
+            whose = "height_map and roughness: their combined" if p.rms_slope > 0 or p.rms_height > 0 \
+                else "height_map: the map's"
+        elif p.rms_slope > 0:
+            whose = "rms_slope: the requested"
+        else:
+            whose = f"rms_height: the {p.rms_height:g} rms height surface's"
         notes.append(f"{whose} rms slope is {slope:.3g}, steeper than {MAX_RMS_SLOPE:g} (45 degrees): the half-space "
                      "(Boussinesq) model assumes gentle slopes"
                      + (" -- are the heights and the pixel size in the same length unit?" if is_map else ""))

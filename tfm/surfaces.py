@@ -201,6 +201,13 @@ def grid_side(p) -> int:
     return 2 * int(math.ceil(p.half_width / p.spacing - 1e-9)) + 1
 
 
+def _rough_grid(p) -> np.ndarray:
+    """The run's roughness on the square grid of its spacing and half-width."""
+    return fourier_synthesis(grid_side(p), p.spacing, p.hurst, rms_height=p.rms_height, rms_slope=p.rms_slope,
+                             short_cutoff=p.short_cutoff, long_cutoff=p.long_cutoff,
+                             rolloff=p.rolloff, seed=p.roughness_seed)
+
+
 def roughness(p, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """The run's random heights at spring positions (x, y); zero when smooth.
 
@@ -208,12 +215,18 @@ def roughness(p, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     springs: exactly on the square layout, bilinearly on the jittered and hexagonal ones."""
     if not is_rough(p):
         return np.zeros(x.size)
-    n = grid_side(p)
-    h = fourier_synthesis(n, p.spacing, p.hurst, rms_height=p.rms_height, rms_slope=p.rms_slope,
-                          short_cutoff=p.short_cutoff, long_cutoff=p.long_cutoff,
-                          rolloff=p.rolloff, seed=p.roughness_seed)
     # the synthesized surface is periodic: jittered springs beyond the box wrap around
-    return sample(h, p.spacing, x, y, periodic=True)
+    return sample(_rough_grid(p), p.spacing, x, y, periodic=True)
+
+
+def roughness_rms_slope(p) -> float:
+    """The spectral rms slope of the run's roughness: ``rms_slope`` as given, or that of the
+    surface an ``rms_height`` makes (its realization's, so it depends on the seed)."""
+    if p.rms_slope > 0:
+        return float(p.rms_slope)
+    if p.rms_height > 0:
+        return spectral_rms_slope(_rough_grid(p), p.spacing)
+    return 0.0
 
 
 def sample(h: np.ndarray, pixel: float, x: np.ndarray, y: np.ndarray, periodic: bool = False) -> np.ndarray:

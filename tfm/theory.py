@@ -119,21 +119,26 @@ def auto_preload_depth(p) -> float:
     ``neighbors_foundation_compliance``. sigma_th = F_th / A with A the layout's spring
     area (``tfm.threshold``, the threshold's one home).
     """
+    if p.kernel == "local":
+        delta = 2.0 * p.c_w * threshold_stress(p)
+    elif p.kernel == "neighbors":
+        delta = 2.0 * neighbors_foundation_compliance(p.neighbor_rings, p.self_term, p.spacing) * threshold_stress(p)
+    else:
+        delta = (1.5 * run_critical_radius(p)) ** 2 / p.radius
+    return delta
+
+
+def threshold_stress(p) -> float:
+    """sigma_th = F_th / A, A the layout's spring area (tfm.threshold, the threshold's home)."""
     from .threshold import nominal_area
 
-    f_th = p.threshold_force
-    area = nominal_area(p)
-    sigma = f_th / area
-    if p.kernel == "local":
-        delta = 2.0 * p.c_w * sigma
-    elif p.kernel == "neighbors":
-        delta = 2.0 * neighbors_foundation_compliance(p.neighbor_rings, p.self_term, p.spacing) * sigma
-    else:
-        # K_IC = sigma_th sqrt(spacing) on the square grid (effective_toughness); the
-        # layout's own area gives sigma_th
-        a_c = jkr_critical_radius(sigma * math.sqrt(p.spacing), p.radius)
-        delta = (1.5 * a_c) ** 2 / p.radius
-    return delta
+    return p.threshold_force / nominal_area(p)
+
+
+def run_critical_radius(p) -> float:
+    """The JKR critical radius a_c of a run's paraboloid (Boussinesq kernel, paper units):
+    K_IC = sigma_th sqrt(spacing) (effective_toughness, with the layout's own area)."""
+    return jkr_critical_radius(threshold_stress(p) * math.sqrt(p.spacing), p.radius)
 
 
 AUTO_PRELOAD_CAP = 0.5      # times R: never as deep as the sphere itself
