@@ -228,11 +228,15 @@ def test_a_npy_map_without_a_pixel_size_is_warned_about(tmp_path):
 
     kw = dict(shape="height_map", height_map=_map(tmp_path), spacing="1/32", f_th=0.0, max_indent=1e-3,
               step=1e-4)
-    with pytest.warns(ParameterWarning, match="map_pixel_size: not given, and the map carries none"):
+    with pytest.warns(ParameterWarning, match=r"map_pixel_size: not given, and the map carries none \(a \.npy file\)"):
         Params.from_dict(kw)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         Params.from_dict({**kw, "map_pixel_size": "1/32"})
+    # a text matrix was called "a .npy array" too
+    np.savetxt(tmp_path / "m.txt", np.load(kw["height_map"]))
+    with pytest.warns(ParameterWarning, match=r"carries none \(a \.txt file\)"):
+        Params.from_dict({**kw, "height_map": str(tmp_path / "m.txt")})
 
 
 def test_a_npy_map_without_a_pixel_size_is_warned_about_on_every_path_to_a_run(tmp_path):
@@ -541,6 +545,23 @@ def test_a_topography_without_a_unit_is_read_in_metres_with_a_warning(tmp_path):
     st.Topography(np.random.default_rng(1).random((33, 33)) * 1e-3, (1.0, 1.0)).to_netcdf(path)
     with pytest.warns(MapUnitWarning, match="gives its size .* but no length unit; .* taken in metres"):
         Params(shape="height_map", height_map=path, spacing=1 / 16, f_th=0.0, max_indent=2e-3, step=1e-4)
+
+
+def test_a_map_refused_for_its_size_still_says_it_was_read_in_metres(tmp_path, capsys):
+    """A 129 x 129 map with sizes but no unit, read as 129 m wide: the command line said only
+    "extent/spacing: the grid would have 64000001 springs a side (shrink extent ...)",
+    naming an extent never given, and dropped the warning that explains the size."""
+    from tfm.cli import main
+
+    st = pytest.importorskip("SurfaceTopography")
+    path = str(tmp_path / "nounit.nc")
+    st.Topography(np.random.default_rng(1).random((129, 129)) * 1e-6, (129.0, 129.0)).to_netcdf(path)
+    assert main(["run", "--shape", "height_map", "--height-map", path, "--spacing", "2e-6", "--f-th", "0",
+                 "--max-indent", "1e-7", "--step", "5e-9", "-q", "--no-plot", "-o", str(tmp_path / "c.parquet")]) == 2
+    err = capsys.readouterr().err
+    assert "tfm: warning:" in err and "no length unit" in err and "taken in metres" in err
+    assert "height_map/spacing: the map, read as 128 wide," in err and "pixel size and length unit" in err
+    assert err.index("no length unit") < err.index("tfm: error:")
 
 
 def test_a_steep_surface_is_flagged_before_the_run(tmp_path):

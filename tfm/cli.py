@@ -93,12 +93,15 @@ def _params_from_args(args) -> Params:
         if raw is None:
             continue
         values[name] = raw                # "none" is read by Params.from_dict (params.NONE_WORDS)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", ParameterWarning)
-        p = Params.from_dict(values)
-    for w in caught:
-        print(f"tfm: warning: {w.message}", file=sys.stderr)
-    return p
+    # the warnings are said before a refusal too: a map's size read in metres for want of a
+    # unit is why its grid came out 64 million springs a side, and the error alone hid that
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ParameterWarning)
+            return Params.from_dict(values)
+    finally:
+        for w in caught:
+            print(f"tfm: warning: {w.message}", file=sys.stderr)
 
 
 class OutputError(ParameterError):

@@ -56,6 +56,15 @@ class ParameterError(ValueError):
     """A run parameter is missing, malformed or outside its allowed range."""
 
 
+class InapplicableError(ParameterError):
+    """A non-default value of a parameter that has no effect in this run (APPLIES);
+    ``name`` is the parameter (a campaign's [base] key may apply in some runs only)."""
+
+    def __init__(self, message: str, name: str):
+        super().__init__(message)
+        self.name = name
+
+
 class ParameterWarning(UserWarning):
     """A parameter was given where it has no effect (its default value, so harmless)."""
 
@@ -265,6 +274,8 @@ class Params:
             clean["f_th"] = None
         try:
             params = cls(**clean)
+        except InapplicableError as exc:
+            raise InapplicableError(f"{prefix}{exc}", exc.name) from None
         except ParameterError as exc:
             raise ParameterError(f"{prefix}{exc}") from None
         # a complete record (a stored one, read back) carries every default: no warnings
@@ -325,7 +336,8 @@ class Params:
                 and self.shape == "height_map" and self.map_pixel_size is None):
             from .surfaces import load_height_map
             if load_height_map(self.height_map).pixel_size is None:
-                warnings.warn(f"{prefix}map_pixel_size: not given, and the map carries none (a .npy array): its pixel is "
+                kind = os.path.splitext(str(self.height_map))[1] or "bare"      # .npy, .npz, .txt: no pixel size
+                warnings.warn(f"{prefix}map_pixel_size: not given, and the map carries none (a {kind} file): its pixel is "
                               f"the spacing ({self.spacing:g}), so at another spacing it is another body, "
                               "scaled with it; give map_pixel_size to fix its size", ParameterWarning,
                               stacklevel=stacklevel)
@@ -490,8 +502,8 @@ def _check_applies(p: Params) -> None:
         value = getattr(p, name)
         if rule.applies(p) or value == _DEFAULTS[name] or rule.also(p):
             continue
-        raise ParameterError(f"{name}: {value!r} has no effect here; it applies only when {rule.when} "
-                             f"(leave it at its default {_DEFAULTS[name]!r})")
+        raise InapplicableError(f"{name}: {value!r} has no effect here; it applies only when {rule.when} "
+                                f"(leave it at its default {_DEFAULTS[name]!r})", name)
 
 
 def parse_param(key: str, value: Any, where: str = "") -> Any:
@@ -690,6 +702,10 @@ def _validate(p: Params) -> None:
         sides = 2.0 * cells + 1.0
         n_side = (f"{2 * math.ceil(cells) + 1}" if cells < 1e9 else f"{sides:.3g}"
                   if math.isfinite(sides) else "more than 1e+308")
+        if p.shape == "height_map":     # the map sets the region: its size as read is the suspect
+            raise ParameterError(f"height_map/spacing: the map, read as {2 * hw:g} wide, would need {n_side} "
+                                 f"springs a side at spacing {p.spacing:g}; the limit is 8193 (enlarge spacing, "
+                                 "or check the map's pixel size and length unit)")
         raise ParameterError(f"extent/spacing: the grid would have {n_side} springs a side; "
                              f"the limit is 8193 (shrink extent or enlarge spacing)")
     if p.kernel == "neighbors" and p.layout != "square":
