@@ -1267,6 +1267,33 @@ def test_a_base_key_that_applies_to_no_run_is_warned_about_once(tmp_path):
                      "operator='tree' and kernel='boussinesq'"]
 
 
+def test_a_smooth_reference_can_share_a_campaign_with_its_rough_runs(tmp_path):
+    """rms_height swept through 0 with the roughness settings in [base] was refused
+    ("short_cutoff: 0.125 has no effect here"), so the smooth reference needed a file of its
+    own. The smooth run now takes the defaults, said and named; it is the very run a smooth
+    file gives (same run id). A [base] key with an effect in no run is still refused."""
+    base = ('name = "rz"\n[base]\nspacing = "1/32"\nk_th = 0.04\nshape = "paraboloid"\nextent = 0.5\n'
+            'max_indent = 0.1\nstep = 2e-3\nshort_cutoff = "4/32"\nlong_cutoff = 0.25\nroughness_seed = 2\n')
+    path = tmp_path / "rz.toml"
+    path.write_text(base + "[sweep]\nrms_height = [0.0, 4e-3, 8e-3]\n")
+    with pytest.warns(ParameterWarning) as caught:
+        spec = load_spec(path)
+    texts = [str(w.message) for w in caught]
+    for name, value, default in (("short_cutoff", "'4/32'", "None"), ("long_cutoff", "0.25", "None"),
+                                 ("roughness_seed", "2", "0")):
+        assert f"{path}: run 0 (1 of 3): [base] {name} = {value} has no effect there (it applies only when the " \
+               f"surface is rough (rms_slope or rms_height > 0)), so they run with its default {default}; " \
+               "the other runs use it" in texts
+    smooth = Params.from_dict(dict(spacing="1/32", k_th=0.04, shape="paraboloid", extent=0.5, max_indent=0.1,
+                                   step=2e-3))
+    assert spec.runs[0].params == smooth and spec.runs[0].run_id == smooth.run_id
+    rough = spec.runs[1].params
+    assert (rough.short_cutoff, rough.long_cutoff, rough.roughness_seed, rough.rms_height) == (0.125, 0.25, 2, 4e-3)
+    path.write_text(base + "[sweep]\nrms_height = [0.0]\nalpha = [0.5, 0.75]\n")
+    with pytest.raises(CampaignError, match=r"\[base\] short_cutoff: 0.125 has no effect here; .*; in every run"):
+        load_spec(path)
+
+
 def test_status_names_checkpoints_of_runs_no_longer_in_the_file(tmp_path, capsys):
     """A run removed from the campaign file while it had a checkpoint: the file stayed in
     checkpoints/ for good, and status never mentioned it."""

@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ..guards import GuardError, check, kernel_check_key
-from ..params import ParameterError, Params, ParameterWarning, parse_param
+from ..params import APPLIES, InapplicableError, ParameterError, Params, ParameterWarning, parse_param
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -239,6 +239,9 @@ def _expand(base, sweep, zips, where):
     axes += [[dict(zip(group, values)) for values in zip(*group.values())] for group in zips]
     # a [base] key said the same for every run, once per run; said once, naming the runs
     said: dict[str, list[tuple[int, str]]] = {}
+    # a [base] key with no effect in some runs (hurst where rms_height is swept through 0):
+    # left at its default there, and said; refused if it has an effect in none
+    unused: dict[str, tuple[str, list[int]]] = {}
     for index, combo in enumerate(itertools.product(*axes)):
         swept: dict[str, Any] = {}
         for part in combo:
@@ -253,7 +256,15 @@ def _expand(base, sweep, zips, where):
                 for key in swept:
                     warnings.filterwarnings("ignore", message=f".*: {re.escape(key)}: given but",
                                             category=ParameterWarning)
-                params = Params.from_dict(values, where=label)
+                while True:
+                    try:
+                        params = Params.from_dict(values, where=label)
+                        break
+                    except InapplicableError as exc:
+                        if exc.name not in base or exc.name in swept:
+                            raise
+                        unused.setdefault(exc.name, (str(exc).removeprefix(f"{label}: "), []))[1].append(index)
+                        values.pop(exc.name)
             for w in caught:
                 if issubclass(w.category, ParameterWarning):
                     said.setdefault(str(w.message).removeprefix(f"{label}: "), []).append((index, label))
@@ -270,6 +281,14 @@ def _expand(base, sweep, zips, where):
                     if "height_map: no such file" in str(exc) else "")
             raise CampaignError(f"{exc}{hint}") from None
         yield Run(index=index, params=params, swept=swept, notes=notes)
+    for name, (text, runs) in unused.items():
+        if len(runs) == index + 1:
+            raise CampaignError(f"{where}: [base] {text}; in every run")
+        which = ", ".join(str(i) for i in runs[:8]) + (", ..." if len(runs) > 8 else "")
+        default = Params.__dataclass_fields__[name].default
+        warnings.warn(f"{where}: run{'s' if len(runs) > 1 else ''} {which} ({len(runs)} of {index + 1}): [base] {name} = {base[name]!r} has no "
+                      f"effect there (it applies only when {APPLIES[name].when}), so they run with its default "
+                      f"{default!r}; the other runs use it", ParameterWarning, stacklevel=3)
     for text, runs in said.items():
         if len(runs) == 1:
             warnings.warn(f"{runs[0][1]}: {text}", ParameterWarning, stacklevel=3)
