@@ -361,6 +361,22 @@ def test_the_paper_reports_links_hold_from_any_out_folder(tmp_path):
     assert _link(toml, REPO / "results" / "paper" / "REPORT.md") == "../../campaigns/paper_fig2_hertz.toml"
 
 
+def test_every_paper_campaign_loads_at_quick_spacings():
+    """The coarse guard's count across a_c refused Fig. 4 at --quick's 1/32 (1.96 springs),
+    so `tfm paper --quick` stopped before its first run. Quick runs that coarse now run
+    flagged (allow = coarse), and only they carry the note."""
+    import warnings
+
+    from tfm.paper.run import CAMPAIGNS, load_spec_for
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        specs = {key: load_spec_for(stem, quick=True) for key, stem in CAMPAIGNS}
+    flagged = {key: [r.index for r in spec.runs if any("allowed past the 'coarse' guard" in n for n in r.notes)]
+               for key, spec in specs.items()}
+    assert flagged["fig4"] == [0] and not any(v for k, v in flagged.items() if k != "fig4")
+
+
 @pytest.mark.parametrize("quick, status", [(False, 1), (True, 0)])
 def test_tfm_paper_exits_1_when_a_claim_does_not_hold(tmp_path, monkeypatch, capsys, quick, status):
     """A claim that fails ('no' in the report) ended with exit 0 and nothing on stderr.

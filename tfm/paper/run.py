@@ -67,12 +67,16 @@ def _coarsen(value, factor: float):
 
 
 def quick_spec(path: Path):
-    """The campaign at twice the spacing and twice the step (pipeline check only)."""
+    """The campaign at twice the spacing and twice the step (pipeline check only). Runs
+    that the coarse guard would refuse there (Fig. 4's alpha = 0 at 1/32: 1.96 springs
+    across a_c) run, flagged: their numbers check the pipeline, not the physics."""
     from ..campaign import spec_from_dict
     from ..params import parse_number
 
     data = _load_toml(path)
     data["name"] = data["name"] + "_quick"
+    base = data.setdefault("base", {})
+    base["allow"] = ",".join(sorted(set(filter(None, str(base.get("allow", "")).split(","))) | {"coarse"}))
     tables = [data.get("base", {}), data.get("sweep", {})] + list(data.get("zip", []))
     for table in tables:
         for key in list(table):
