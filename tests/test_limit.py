@@ -377,6 +377,38 @@ def test_every_paper_campaign_loads_at_quick_spacings():
     assert flagged["fig4"] == [0] and not any(v for k, v in flagged.items() if k != "fig4")
 
 
+@pytest.mark.parametrize("command", ["paper", "limit"])
+def test_an_interrupted_paper_or_limit_says_how_to_resume_in_one_line(tmp_path, monkeypatch, capsys, command):
+    """Ctrl-C or SIGTERM during `tfm limit` or `tfm paper`: a traceback ending in
+    CampaignInterrupted, exit 1, and advice to resume with `tfm campaign run` (which writes
+    no report). Now one line, the shell's status and the command that resumes."""
+    import signal
+
+    from tfm.campaign.runner import CampaignInterrupted
+    from tfm.cli import main
+    from tfm.paper import run
+
+    def stopped(*args, **kwargs):
+        raise CampaignInterrupted("campaign c interrupted by SIGTERM: the finished runs are stored in R; 2 runs "
+                                  "did not finish. To resume, run `tfm campaign run c.toml` again", signal.SIGTERM)
+
+    def ctrl_c(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    target = (run, "run_all") if command == "paper" else (run, "run_specs")      # tfm limit imports it per call
+    monkeypatch.setattr(*target, stopped)
+    args = [command, "--results-dir", str(tmp_path / "r"), "--out", str(tmp_path / "o")]
+    assert main(args) == 143
+    err = capsys.readouterr().err
+    assert err.strip().splitlines()[-1] == (f"tfm {command}: campaign c interrupted by SIGTERM: the finished runs "
+                                            f"are stored in R; 2 runs did not finish. The same tfm {command} "
+                                            "command resumes from them")
+    assert "Traceback" not in err and "tfm campaign run" not in err
+    monkeypatch.setattr(*target, ctrl_c)
+    assert main(args) == 130
+    assert f"tfm {command}: interrupted. Every finished run is stored" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("quick, status", [(False, 1), (True, 0)])
 def test_tfm_paper_exits_1_when_a_claim_does_not_hold(tmp_path, monkeypatch, capsys, quick, status):
     """A claim that fails ('no' in the report) ended with exit 0 and nothing on stderr.

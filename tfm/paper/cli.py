@@ -40,7 +40,28 @@ def add_limit_arguments(ap: argparse.ArgumentParser) -> None:
                     help="no progress of the campaigns and no table of the fits (they are in REPORT.md)")
 
 
+def _resumable(command: str, work) -> int:
+    """``work()``, and on Ctrl-C or SIGTERM one line and the shell's status (130, 143): a
+    campaign's own message said to resume with `tfm campaign run`, which redraws no
+    figure and writes no report, above a traceback and exit status 1."""
+    import signal
+
+    from ..progress import say
+
+    try:
+        return work()
+    except KeyboardInterrupt as exc:
+        stored = str(exc).split(". To resume", 1)[0]       # CampaignInterrupted: what was kept
+        say(f"{command}: {stored}. The same {command} command resumes from them" if stored else
+            f"{command}: interrupted. Every finished run is stored: the same {command} command resumes from them")
+        return 128 + getattr(exc, "signum", signal.SIGINT)
+
+
 def cmd_paper(args) -> int:
+    return _resumable("tfm paper", lambda: _paper(args))
+
+
+def _paper(args) -> int:
     from ..params import ParameterError
     from . import claims, report
     from .run import run_all
@@ -85,7 +106,7 @@ def cmd_paper(args) -> int:
 def cmd_limit(args) -> int:
     from .limit import main_limit
 
-    return main_limit(args)
+    return _resumable("tfm limit", lambda: main_limit(args))
 
 
 def register(subparsers) -> None:
