@@ -409,6 +409,21 @@ def test_an_interrupted_paper_or_limit_says_how_to_resume_in_one_line(tmp_path, 
     assert f"tfm {command}: interrupted. Every finished run is stored" in capsys.readouterr().err
 
 
+def test_the_limit_reports_links_hold_from_any_out_folder(tmp_path, monkeypatch):
+    """`tfm limit --out elsewhere` wrote ../../campaigns/... and ../paper/REPORT.md, which
+    resolve only from results/limit/."""
+    from tfm.cli import main
+    from tfm.paper.run import REPO
+
+    monkeypatch.chdir(REPO)              # the kept points of results/limit/ are read from here
+    out = tmp_path / "a" / "b"
+    assert main(["limit", "--analyse-only", "--out", str(out), "--results-dir", str(tmp_path / "none"), "-q"]) == 0
+    links = re.findall(r"\]\(([^)#]+\.(?:md|toml))\)", (out / "REPORT.md").read_text())
+    assert {Path(t).name for t in links} >= {"REPORT.md", "limit_sphere.toml", "limit_punch.toml"}
+    for target in links:
+        assert (out / target).resolve().exists(), target
+
+
 @pytest.mark.parametrize("quick, status", [(False, 1), (True, 0)])
 def test_tfm_paper_exits_1_when_a_claim_does_not_hold(tmp_path, monkeypatch, capsys, quick, status):
     """A claim that fails ('no' in the report) ended with exit 0 and nothing on stderr.

@@ -87,7 +87,8 @@ def _paper(args) -> int:
 
     wall = time.perf_counter() - t0
     report.write_report(out_dir / "REPORT.md", runs, res, figures, wall, args.jobs, start, args.quick,
-                        limit_line=None if args.quick else summary_line(Path("results/limit")))
+                        limit_line=None if args.quick else summary_line(Path("results/limit"), out_dir / "REPORT.md"),
+                        results_dir=results_dir)
     import pandas as pd
 
     print(report.md_table(pd.DataFrame([c.__dict__ for c in res.claims])[["section", "claim", "tfm", "agrees"]]))

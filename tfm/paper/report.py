@@ -267,7 +267,8 @@ def _link(target: Path, report: Path) -> str:
 
 
 def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], wall: float, jobs: int,
-                 start_machine: dict, quick: bool, limit_line: str | None = None) -> None:
+                 start_machine: dict, quick: bool, limit_line: str | None = None,
+                 results_dir: Path | str = "results") -> None:
     m = machine()
     total_runs = sum(r.n_runs for r in runs.values())
     computed = sum(r.computed for r in runs.values())
@@ -319,7 +320,8 @@ def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], 
             f"{last['run_seconds']:.0f} s, load average {last['load_start']:.1f} at the start and "
             f"{last['load_end']:.1f} at the end on {last['nproc']} cores.")
     lines += [
-        "- campaigns (results in `results/<name>/`; `make paper` again resumes and only analyses):",
+        f"- campaigns (results in `{Path(results_dir).as_posix()}/<name>/`; the same command again resumes and "
+        "only analyses):",
         "",
         "| campaign | runs | computed now | wall time (s) | what" + (" (the full-size values; these quick runs "
                                                                     "doubled every spacing and step)" if quick else "")
