@@ -801,6 +801,12 @@ def test_the_header_gives_the_units_of_an_si_run_and_the_trees_angle(tmp_path, c
             main(["run", *args, "--no-plot", "-o", str(tmp_path / "c.parquet")])
     si, tree = [line for line in capsys.readouterr().err.splitlines() if line.startswith("tfm run ")]
     assert re.search(r"spacing=\S+ m F_th=\S+ N R=0.001 m .* max_indent=\S+ m \(", si), si
-    assert "operator=tree theta=0.6 " in tree
+    assert "operator=tree theta=0.6 " in tree and "layout=" not in tree
+    # a jittered run's header names its layout (it read like a square grid's)
+    with pytest.raises(Announced):
+        main(["run", *SMALL[:-1], "--operator", "tree", "--layout", "jittered", "--jitter", "0.2", "--seed", "3",
+              "--no-plot", "-o", str(tmp_path / "j.parquet")])
+    jittered = [line for line in capsys.readouterr().err.splitlines() if line.startswith("tfm run ")][0]
+    assert " shape=paraboloid layout=jittered jitter=0.2 seed=3 kernel=" in jittered, jittered
     # and an SI spacing is no fraction in a caption: 1e-5 m was "1/100000 m"
     assert spacing_text(1e-5) == "$10^{-5}$" and spacing_text(1 / 128) == "1/128"
