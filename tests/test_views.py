@@ -93,6 +93,43 @@ def test_default_figure_renders_without_faults(case, tmp_path):
     assert _ticks_overlap(fig) == []
 
 
+def test_the_legend_keeps_off_the_snap_off():
+    """An adhesive flat punch (the issue's R = 0.25 at 1/32, preload 0.005): the legend
+    placed "best" sat on the snap-off marker and its jump, which it cannot see (an
+    annotation arrow); it now avoids both."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.path import Path as MPath
+
+    res = tfm.simulate(spacing=1 / 32, shape="flat_punch", radius=0.25, k_th=0.02, max_indent=0.005, step=1e-4)
+    fig = plots.plot_curve(res.curve, res.params)
+    FigureCanvasAgg(fig).draw()
+    ax = fig.axes[0]
+    box = ax.get_legend().get_window_extent()
+    marker = [ln for ln in ax.get_lines() if ln.get_label() == "snap-off (jump)"][0]
+    at = ax.transData.transform(np.column_stack([marker.get_xdata(), marker.get_ydata()]))[0]
+    assert not box.contains(*at)
+    jump = [a for a in ax.texts if hasattr(a, "xyann")][0]
+    ends = ax.transData.transform([jump.xyann, jump.xy])
+    assert not MPath(ends).intersects_bbox(box, filled=False)
+
+
+def test_the_convergent_alpha_marks_stay_below_the_legend():
+    """Sec. 3.2's panel (d): the alpha* marks were full-height lines through the legend's
+    text (upper left); they now drop from the zero crossing to the axis."""
+    from types import SimpleNamespace
+
+    summary = pd.DataFrame([dict(p_kernel="local", p_alpha=a, p_spacing=h, r_pull_off_force=(1 / h) ** (1 - a))
+                            for a in (0.75, 1.0, 1.25) for h in (1 / 32, 1 / 64)])
+    slopes = pd.DataFrame(dict(p_kernel="local", p_alpha=[0.75, 1.0, 1.25], slope=[-1.0, 0.0, 1.0],
+                               ci_low=[-1.3, -0.3, 0.7], ci_high=[-0.7, 0.3, 1.3]))
+    zc = SimpleNamespace(alpha=1.0, intercept=-4.0, gradient=4.0, text=lambda digits: "1.000 ± 0.010")
+    fig = plots.plot_kernel_study(summary, slopes, {"local": zc})
+    ax = fig.axes[-1]
+    marks = [ln for ln in ax.get_lines() if ln.get_linestyle() == ":"]
+    assert len(marks) == 1 and list(marks[0].get_xdata()) == [1.0, 1.0]
+    assert max(marks[0].get_ydata()) == 0.0 and min(marks[0].get_ydata()) == ax.get_ylim()[0]
+
+
 def test_alpha_is_named_when_it_acts():
     p = tfm.Params(spacing=1 / 128, **STANDARD, f_th=None)
     text = plots.run_caption(p)

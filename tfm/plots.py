@@ -303,10 +303,18 @@ def split_snap_off(part):
     return part, None
 
 
+JUMP_POINTS = 200
+
+
 def draw_jump(ax, x, y, colour, label=None):
     """A jump from (x[0], y[0]) to (x[1], y[1]): dotted arrow, open circle at the end."""
     ax.annotate("", xy=(x[1], y[1]), xytext=(x[0], y[0]),
                 arrowprops=dict(arrowstyle="->", color=colour, ls=":", lw=1.0, shrinkA=0, shrinkB=2))
+    # the same path as an unseen line of many points: a legend placed "best" avoids line
+    # vertices but not annotation arrows, and the flat punch's legend sat on its jump (the
+    # curves' own lines have a vertex per step)
+    ax.plot(np.linspace(x[0], x[1], JUMP_POINTS), np.linspace(y[0], y[1], JUMP_POINTS), alpha=0.0,
+            label="_jump path")
     ax.plot([x[1]], [y[1]], "o", mfc="white", mec=colour, ms=3.5, label=label)
 
 
@@ -801,7 +809,12 @@ def plot_kernel_study(summary, slopes, crossings, path=None, title=None):
         if zc is not None:
             aa = np.linspace(g["p_alpha"].min() - 0.05, g["p_alpha"].max() + 0.05, 20)
             ax2.plot(aa, zc.intercept + zc.gradient * aa, "-", color=c, lw=0.8)
-            ax2.axvline(zc.alpha, color=c, lw=0.6, ls=":")
+    # alpha* marked by a drop line from the crossing to the axis: a full-height line ran
+    # through the legend's text
+    bottom = ax2.get_ylim()[0]
+    for kernel, zc in crossings.items():
+        ax2.plot([zc.alpha, zc.alpha], [bottom, 0.0], color=colours.get(kernel), lw=0.6, ls=":")
+    ax2.set_ylim(bottom=bottom)
     ax2.axhline(0, color="0.6", lw=0.6)
     ax2.set_xlabel("$\\alpha$")
     ax2.set_ylabel("d ln $F_{max}$ / d ln $\\Delta$")
