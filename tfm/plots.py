@@ -310,11 +310,15 @@ def draw_jump(ax, x, y, colour, label=None):
     """A jump from (x[0], y[0]) to (x[1], y[1]): dotted arrow, open circle at the end."""
     ax.annotate("", xy=(x[1], y[1]), xytext=(x[0], y[0]),
                 arrowprops=dict(arrowstyle="->", color=colour, ls=":", lw=1.0, shrinkA=0, shrinkB=2))
-    # the same path as an unseen line of many points: a legend placed "best" avoids line
-    # vertices but not annotation arrows, and the flat punch's legend sat on its jump (the
-    # curves' own lines have a vertex per step)
-    ax.plot(np.linspace(x[0], x[1], JUMP_POINTS), np.linspace(y[0], y[1], JUMP_POINTS), alpha=0.0,
-            label="_jump path")
+    # the same path as an unseen patch of many points: a legend placed "best" avoids the
+    # vertices of lines and patches but not annotation arrows, and the flat punch's legend sat
+    # on its jump (the curves' own lines have a vertex per step). A patch, not a line: the
+    # axes' lines stay the drawn curves.
+    from matplotlib.patches import PathPatch
+    from matplotlib.path import Path as MplPath
+
+    path = MplPath(np.column_stack([np.linspace(x[0], x[1], JUMP_POINTS), np.linspace(y[0], y[1], JUMP_POINTS)]))
+    ax.add_patch(PathPatch(path, fill=False, alpha=0.0, lw=0.0))
     ax.plot([x[1]], [y[1]], "o", mfc="white", mec=colour, ms=3.5, label=label)
 
 
