@@ -201,11 +201,23 @@ def grid_side(p) -> int:
     return 2 * int(math.ceil(p.half_width / p.spacing - 1e-9)) + 1
 
 
+_ROUGH_GRID: dict = {}      # the last surface made: the guards' slope check and the run share it
+
+
 def _rough_grid(p) -> np.ndarray:
-    """The run's roughness on the square grid of its spacing and half-width."""
-    return fourier_synthesis(grid_side(p), p.spacing, p.hurst, rms_height=p.rms_height, rms_slope=p.rms_slope,
-                             short_cutoff=p.short_cutoff, long_cutoff=p.long_cutoff,
-                             rolloff=p.rolloff, seed=p.roughness_seed)
+    """The run's roughness on the square grid of its spacing and half-width (read-only).
+    Kept until another surface is made, so a run synthesizes its surface once."""
+    key = (grid_side(p), p.spacing, p.hurst, p.rms_height, p.rms_slope, p.short_cutoff, p.long_cutoff,
+           p.rolloff, p.roughness_seed)
+    h = _ROUGH_GRID.get(key)
+    if h is None:
+        h = fourier_synthesis(key[0], p.spacing, p.hurst, rms_height=p.rms_height, rms_slope=p.rms_slope,
+                              short_cutoff=p.short_cutoff, long_cutoff=p.long_cutoff,
+                              rolloff=p.rolloff, seed=p.roughness_seed)
+        h.setflags(write=False)
+        _ROUGH_GRID.clear()
+        _ROUGH_GRID[key] = h
+    return h
 
 
 def roughness(p, x: np.ndarray, y: np.ndarray) -> np.ndarray:
