@@ -690,7 +690,8 @@ def _validate(p: Params) -> None:
         raise ParameterError(f"step: {depth} / step = {dmax / p.step:.3g} steps; must be <= {MAX_STEPS:g}")
     if p.shape == "sphere" and dmax >= p.radius:
         if p.control == "force" and p.max_load is not None:
-            raise ParameterError(f"max_load: {p.max_load:g}{' N' if p.units == 'si' else ''} would press a sphere of radius {p.radius:g} in by "
+            from .units import unit_suffixes
+            raise ParameterError(f"max_load: {p.max_load:g}{unit_suffixes(p)[1]} would press a sphere of radius {p.radius:g} in by "
                                  f"{dmax:.3g} (its Hertz depth), deeper than its radius; lower max_load")
         raise ParameterError(f"max_indent: must be < radius ({p.radius:g}) for a sphere, got {dmax!r}")
     _check_map_covers(p)
@@ -907,7 +908,9 @@ def _validate_surface_relations(p: Params) -> None:
 def _depth_text(p: Params, dmax: float) -> str:
     """The preload depth as messages name it: max_indent, or, under force control, the
     depth of max_load as the user gave it (newtons and metres for an SI record)."""
-    length, force = (" m", " N") if p.units == "si" else ("", "")
+    from .units import unit_suffixes
+
+    length, force = unit_suffixes(p)
     if p.control == "force" and p.max_load is not None:
         return f"the depth of max_load {p.max_load:g}{force} ({dmax:.3g}{length})"
     return f"max_indent ({dmax:g}{length})"
