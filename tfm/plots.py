@@ -597,6 +597,9 @@ class _NullAxes:
     def annotate(self, *a, **k):
         return None
 
+    def add_patch(self, *a, **k):
+        return None
+
 
 # ---- the paper's figures (tfm.paper) -------------------------------------------
 @styled
