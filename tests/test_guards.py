@@ -33,6 +33,9 @@ OK = dict(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05, step=2
     (dict(c_w=2.0), "c_w: 2.0 has no effect here; it applies only when kernel='local'"),
     (dict(kernel="local", self_term=4.0, k_th=0.02, f_th=None), "self_term: .* 'boussinesq' or 'neighbors'"),
     (dict(extent=0.5, extent_margin=2.0), "extent_margin: .* extent is automatic"),
+    # the local kernel is a diagonal: every operator gave the same bits under another run id
+    (dict(kernel="local", operator="tree", k_th=0.02, f_th=None),
+     "operator: 'tree' has no effect here; it applies only when kernel is 'boussinesq' or 'neighbors'"),
 ])
 def test_a_parameter_that_does_not_apply_is_refused(kw, match):
     with pytest.raises(ParameterError, match=match):
@@ -53,6 +56,7 @@ def test_the_same_parameters_are_accepted_where_they_apply():
 @pytest.mark.parametrize("values, name", [
     (dict(theta="0.5"), "theta"),                       # the default, on the FFT operator
     (dict(c_w=1.0, k_th=0.02), "c_w"),                  # the default, on the 1/r kernel
+    (dict(operator="fft", kernel="local", k_th=0.02), "operator"),   # the default, on the diagonal
 ])
 def test_a_default_given_where_it_does_not_apply_is_a_named_warning(values, name):
     with pytest.warns(ParameterWarning, match=f"^{name}: given but has no effect"):

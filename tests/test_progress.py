@@ -137,5 +137,5 @@ def test_a_first_run_of_another_operator_is_announced(monkeypatch):
     assert "snap_rounds" not in cold_kernels(data="FFTData")
     assert "snap_rounds" in cold_kernels(data="DirectData")
     assert [compiled_data_name(Params(operator=op, kernel=k)) for op, k in
-            (("fft", "boussinesq"), ("direct", "local"), ("tree", "boussinesq"), ("tree", "neighbors"))] == \
-        ["FFTData", "DirectData", "TreeData", "SparseData"]
+            (("fft", "boussinesq"), ("direct", "boussinesq"), ("tree", "boussinesq"), ("tree", "neighbors"),
+             ("fft", "local"))] == ["FFTData", "DirectData", "TreeData", "SparseData", "SparseData"]

@@ -241,11 +241,12 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
         body = f"map={Path(p.height_map).name}" if p.shape == "height_map" else f"R={p.radius:g}{m}"
         n_load = n_loading_steps(p)
         theta = f" theta={p.theta:g}" if p.operator == "tree" and p.kernel == "boussinesq" else ""
+        operator = "" if p.kernel == "local" else f" operator={p.operator}"   # a diagonal: none used
         # a hexagonal or jittered run looked like a square-grid one
         layout = "" if p.layout == "square" else f" layout={p.layout}" + (
             f" jitter={p.jitter:g} seed={p.seed}" if p.layout == "jittered" else "")
         print(f"tfm run {p.run_id}: spacing={p.spacing:.6g}{m} F_th={p.threshold_force:.4g}{N} "
-              f"{body} shape={p.shape}{layout} kernel={p.kernel} operator={p.operator}{theta} "
+              f"{body} shape={p.shape}{layout} kernel={p.kernel}{operator}{theta} "
               f"max_indent={p.delta_max:.4g}{m} ({n_load} loading step{'' if n_load == 1 else 's'}), "
               f"memory ~{estimate_memory(p) / 2**20:.0f} MiB", file=sys.stderr)
         if p.shape == "height_map" and p.extent is None:

@@ -187,7 +187,8 @@ def estimate_memory(p) -> float:
     plus the field snapshots' buffers, plus the Python/NumPy/SciPy/Numba runtime.
     """
     n = n_springs(p)
-    total = BASELINE_BYTES + BYTES_PER_SPRING[p.operator] * n
+    # every local run takes the neighbour-list path (tfm.operators.make_operator)
+    total = BASELINE_BYTES + BYTES_PER_SPRING["tree" if p.kernel == "local" else p.operator] * n
     if p.layout == "square":          # the full-grid symbol is built for every kernel
         side = int(round(math.sqrt(n)))
         P = _next_fast_len(2 * side - 1)

@@ -460,6 +460,10 @@ APPLIES: dict[str, Applies] = {
     # the tree serves the long-range kernel only (local and neighbors sums are exact)
     "theta": Applies("operator='tree' and kernel='boussinesq'",
                      lambda p: p.operator == "tree" and p.kernel == "boussinesq"),
+    # the Winkler kernel is a diagonal: it has no sum for an operator to compute (its runs
+    # take the neighbour-list path with no neighbours, O(N) on any layout)
+    "operator": Applies("kernel is 'boussinesq' or 'neighbors' (the local kernel is a diagonal, "
+                        "computed alike on every layout)", lambda p: p.kernel != "local"),
     "jitter": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
     "seed": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
     "max_load": Applies("control='force'", lambda p: p.control == "force"),
@@ -711,7 +715,7 @@ def _validate(p: Params) -> None:
                              f"the limit is 8193 (shrink extent or enlarge spacing)")
     if p.kernel == "neighbors" and p.layout != "square":
         raise ParameterError("kernel: 'neighbors' counts rings of the square grid; use layout='square'")
-    if p.operator == "fft" and p.layout != "square":
+    if p.operator == "fft" and p.layout != "square" and p.kernel != "local":
         raise ParameterError(f"operator: 'fft' needs a regular square grid, but layout={p.layout!r}; "
                              "use operator='tree' or 'direct'")
     if p.preconditioner in ("stencil", "fft") and p.layout != "square":
