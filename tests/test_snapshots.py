@@ -72,6 +72,12 @@ def test_no_pull_off_event_without_tension_and_no_last_contact_while_in_contact(
     fields = Fields(tmp_path / "a.fields.nc")
     assert (plain.curve["force"] >= 0).all()                   # it never pulls
     assert "pull_off_step" not in fields.attrs and "last_contact_step" in fields.attrs
+    # with F_th = 0 springs snap while loading too; the event is the summary's first snap,
+    # an unloading one (it was the loading step 0, drawn by `tfm show` as "first snap")
+    unload = plain.curve[plain.curve["phase"] == "unload"]
+    first = unload[unload["n_snapped"] > 0].iloc[0]
+    assert fields.event_step("first_snap") == int(first["step"])
+    assert first["indent"] == plain.summary["first_snap_indent"]
     with pytest.warns(tfm.RunWarning, match="unloading stopped at max_unload_steps"):
         capped = tfm.simulate(spacing=1 / 32, max_unload_steps=5, snapshots="events",
                               fields_path=tmp_path / "b.fields.nc", **STANDARD, step=1e-3)

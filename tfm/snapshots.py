@@ -226,7 +226,9 @@ class SnapshotWriter:
             self._settle("last_contact", self._prev)
         if self.every is not None and rec.step % self.every == 0:
             self._write(_plain(rec), state.F, state.u, st, f"every_{self.every}")
-        if rec.n_snapped > 0 and not self._first_snap_done:
+        # the summary's first snap (first_snap_indent): an unloading one; with F_th = 0 springs
+        # also snap while loading
+        if rec.n_snapped > 0 and rec.phase == "unload" and not self._first_snap_done:
             self._first_snap_done = True
             self._write(_plain(rec), state.F, state.u, st, "first_snap")
         if self._best_load is None or rec.force > self._best_load.rec["force"]:
