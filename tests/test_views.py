@@ -151,6 +151,9 @@ def test_an_si_caption_names_the_work_of_adhesion_and_the_units():
     assert "$c$ = 7," in plots.run_caption(p.replace(k_th_coefficient=7.0))
     q = tfm.Params.from_dict(dict(si, f_th=2e-6, alpha=0))
     assert "$F_{th}$ = $2\\times10^{-6}$ N" in plots.run_caption(q)
+    # the settings named only when set carry their units too (load_step = 10^-5 had none)
+    r = q.replace(control="force", max_load=1e-3, load_step=1e-5, max_indent="auto", extent=2e-4)
+    assert "load_step = $10^{-5}$ N" in plots.run_caption(r) and "extent = $2\\times10^{-4}$ m" in plots.run_caption(r)
 
 
 def test_an_si_figure_draws_hertz_in_newtons_and_keeps_its_caption_inside():
@@ -277,6 +280,19 @@ def test_plot_and_show_from_a_stored_run(stored_run, capsys):
     assert stored_run.with_name(f"curve.step{k}.png").stat().st_size > 10_000
     assert main(["show", str(stored_run), "--step", "3"]) == 2        # not stored: says which are
     assert "nearest stored steps" in capsys.readouterr().err
+
+
+def test_a_run_without_a_pull_off_says_why_and_which_events_it_has(tmp_path, capsys):
+    """`tfm show` of a run with no adhesion said only "no pull_off snapshot stored"; and the
+    event names were not read like every other named value (" MAX_LOAD " was refused)."""
+    out = tmp_path / "plain.parquet"
+    assert main(["run", "--spacing", "1/32", "--f-th", "0", "--shape", "paraboloid", "--max-indent", "0.05",
+                 "--step", "1e-3", "--snapshots", "events", "-q", "--no-plot", "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["show", str(out)]) == 2                               # the default event: pull_off
+    err = capsys.readouterr().err
+    assert "no pull_off snapshot: the run never pulled" in err and "stored events: max_load (step " in err
+    assert main(["show", str(out), "--step", " MAX_LOAD "]) == 0
 
 
 @pytest.mark.parametrize("view", [["plot"], ["show", "--step", "pull_off"]])
@@ -612,6 +628,7 @@ def test_show_and_animate_of_an_si_run_name_the_units_like_tfm_plot(si_run, monk
         ax_map, ax_curve, cbar = fig.axes[:3]
         assert (_no_offset(ax_map.get_xlabel()), _no_offset(ax_map.get_ylabel())) == ("$x$ in m", "$y$ in m")
         assert cbar.get_ylabel() == "spring force $F$ in N (tension > 0)"
+        assert re.fullmatch(r"\$F_\{th\}\$ = .* N", cbar.get_title(loc="left"))    # the threshold's value too
         assert _no_offset(ax_curve.get_ylabel()) == _no_offset(reference.get_ylabel()) == \
             "force $P$ in N (compression > 0)"
         assert _no_offset(ax_curve.get_xlabel()) == _no_offset(reference.get_xlabel()) == "indentation $\\delta = -d$ in m"

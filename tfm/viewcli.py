@@ -91,6 +91,8 @@ def load_run(path: Path):
     Refuses a file that is not one run's curve table (ViewError)."""
     import pyarrow
 
+    path = Path(path)
+
     from .params import ParameterError, Params
     from .results import fields_path_for, read_checked, read_metadata
 
@@ -180,15 +182,26 @@ def _need_fields(path, fields, params):
         if stale is None:
             held = f"the snapshots of run {theirs}" if theirs else "snapshots of no recorded run"
             stale = (f"{candidate} holds {held}, not of run {table_id or params.run_id} in {path}: "
-                     "stale, from an earlier run; rerun this one with --snapshots events")
+                     "stale, from an earlier run; rerun this one with snapshots on (--snapshots events or a step count)")
     raise ViewError(stale)
 
 
+# why a run has no snapshot of an event (tfm.snapshots.SnapshotWriter.observe)
+EVENT_ABSENT = {"pull_off": "the run never pulled (no step under tension: no adhesion)",
+                "first_snap": "no spring snapped while unloading",
+                "last_contact": "unloading stopped with springs still in contact",
+                "max_load": "no step was recorded"}
+
+
 def pick_step(fields, step: str) -> int:
-    if step in EVENT_NAMES:
+    if step.strip().lower() in EVENT_NAMES:      # read like every other named value
+        step = step.strip().lower()
         k = fields.event_step(step)
         if k is None:
-            raise ViewError(f"{fields.path}: no {step} snapshot stored")
+            stored = [f"{e} (step {fields.event_step(e)})" for e in EVENT_NAMES if fields.event_step(e) is not None]
+            raise ViewError(f"{fields.path}: no {step} snapshot: {EVENT_ABSENT[step]}; "
+                            + (f"stored events: {', '.join(stored)}; pick one with --step"
+                               if stored else "no event snapshot stored"))
         return k
     try:
         k = int(step)
