@@ -220,3 +220,19 @@ def test_force_control_on_a_height_map_is_refused(tmp_path):
     with pytest.raises(ParameterError, match="control: 'force' is not available for shape='height_map'"):
         Params(shape="height_map", height_map=str(m), spacing=1 / 32, f_th=0.0, alpha=0.0, control="force",
                max_indent=0.01, step=1e-3)
+
+
+def test_the_run_header_counts_the_flats_moves_under_force_control(capsys, tmp_path):
+    """The header said "(100 loading steps)" for a load whose depth, 38, took 38,000 solves
+    of at most `step` each: an hour's run announced as 100 steps (a user's hunt)."""
+    from tfm.cli import main
+
+    argv = ["run", "--spacing", "1/32", "--shape", "paraboloid", "--k-th", "0.02", "--control", "force",
+            "--max-load", "0.01", "--step", "1e-3", "--no-plot", "-o", str(tmp_path / "x.parquet")]
+    assert main(argv) == 0
+    header = next(line for line in capsys.readouterr().err.splitlines() if line.startswith("tfm run "))
+    p = Params.from_dict(dict(spacing="1/32", shape="paraboloid", k_th=0.02, control="force", max_load=0.01,
+                              step=1e-3))
+    moves = int(np.ceil(p.delta_max / 1e-3 - 1e-9))
+    assert moves > 10                                   # the Hertz depth of 0.01, in steps of 1e-3
+    assert f"(100 load levels; the flat moves at most step=0.001 a solve: {moves:,} or more solves" in header
