@@ -12,7 +12,8 @@ from tfm.params import ParameterWarning, parse_number
     (dict(spacing=0), "spacing: must be > 0"),
     (dict(spacing=-1 / 64), "spacing: must be > 0"),
     (dict(spacing=math.nan), "spacing: must be finite"),
-    (dict(spacing=0.5, extent=0.1), "spacing: must be <= the grid half-width"),
+    # the extent given is named, not the spacing (a user's hunt: "spacing: must be <= ...")
+    (dict(spacing=0.5, extent=0.1), "extent: the grid half-width 0.1 is smaller than the spacing 0.5"),
     (dict(k_th=-0.02, f_th=None), "k_th: must be >= 0"),
     (dict(f_th=-1e-5), "f_th: must be >= 0"),
     (dict(k_th=0.02, f_th=2e-5), "only one of k_th and f_th"),
@@ -183,7 +184,7 @@ ROUGH = dict(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05, ste
     (dict(ROUGH, rms_height=0.0, control="force", max_indent=0.05, load_step=1e-12),
      r"load_step: the peak load / load_step = 4\.\d+e\+09 load steps; must be <= 1e\+06"),
     (dict(ROUGH, rms_height=0.0, max_indent="auto", control="force", max_load=1e-12),
-     r"step: must be <= the depth of max_load 1e-12"),
+     r"step: must be <= the depth of max_load 1e-12.*; lower step or raise max_load$"),
 ])
 def test_input_that_ran_or_crashed_is_refused_before_computing(kw, match):
     with pytest.raises(ParameterError, match=match):

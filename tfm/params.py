@@ -689,7 +689,8 @@ def _validate(p: Params) -> None:
     # under force control with a max_load the depth is that load's (Hertz or punch)
     depth = _depth_text(p, dmax)
     if p.step > dmax:
-        raise ParameterError(f"step: must be <= {depth}, got {p.step!r}")
+        fix = "; lower step or raise max_load" if p.control == "force" else ""
+        raise ParameterError(f"step: must be <= {depth}, got {p.step!r}{fix}")
     if dmax / p.step > MAX_STEPS:
         raise ParameterError(f"step: {depth} / step = {dmax / p.step:.3g} steps; must be <= {MAX_STEPS:g}")
     if p.shape == "sphere" and dmax >= p.radius:
@@ -700,6 +701,9 @@ def _validate(p: Params) -> None:
         raise ParameterError(f"max_indent: must be < radius ({p.radius:g}) for a sphere, got {dmax!r}")
     _check_map_covers(p)
     hw = p.half_width
+    if p.spacing > hw and p.extent is not None:       # the extent given is the likelier slip
+        raise ParameterError(f"extent: the grid half-width {hw:g} is smaller than the spacing {p.spacing:g}, "
+                             "so the grid would be its centre spring alone; enlarge extent or shrink spacing")
     if p.spacing > hw:
         raise ParameterError(f"spacing: must be <= the grid half-width ({hw:g}); got {p.spacing!r}")
     cells = hw / p.spacing              # a float: inf for an absurd extent (math.ceil would raise)
