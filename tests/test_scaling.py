@@ -440,6 +440,13 @@ def test_analysis_refuses_what_it_cannot_fit_by_name():
     empty = pd.DataFrame({"phase": [], "indent": [], "force": [], "contact_area": [], "contact_radius": []})
     with pytest.raises(ValueError, match="run_metrics: the curve has no rows"):
         analysis.run_metrics(empty)
+    # these three gave 0.0, an AttributeError and NumPy's bare "could not convert" (a user's hunt)
+    with pytest.raises(ValueError, match="hysteresis: the curve has no rows"):
+        analysis.hysteresis(empty)
+    with pytest.raises(ValueError, match="run_metrics: the curve lacks the column contact_area"):
+        analysis.run_metrics({"indent": [0.0, 0.01], "force": [1.0, 2.0]})
+    with pytest.raises(ValueError, match="fit_power_law: x must be numbers"):
+        fit_power_law(["a", "b", "c"], [1, 4, 5])
     with pytest.raises(ValueError, match="hertz_errors: the curve has no loading step"):
         analysis.hertz_errors(empty, 1.0, 1 / 32)
     pushed = pd.DataFrame({"phase": ["load", "unload"], "indent": [0.01, 0.0], "force": [0.02, 0.0],

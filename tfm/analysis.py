@@ -107,8 +107,7 @@ def _t_quantile(dof: int, confidence: float) -> float:
 def _clean(x, y, who: str, names: tuple[str, str] = ("x", "y")):
     """x and y as float arrays of one shape, every value finite: a NaN or inf would
     otherwise pass the sign checks and come out as a NaN fit (with r2 = 1)."""
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
+    x, y = (_numbers(v, who, name) for v, name in zip((x, y), names))
     if x.shape != y.shape:
         raise ValueError(f"{who}: {names[0]} and {names[1]} must have the same shape, got {x.shape} and {y.shape}")
     if x.ndim > 1:                       # a table's columns given as a 2-D array were flattened into one fit
@@ -118,6 +117,30 @@ def _clean(x, y, who: str, names: tuple[str, str] = ("x", "y")):
         if bad.size:
             raise ValueError(f"{who}: {name} must be finite, got {v[bad[0]]} at index {bad[0]}")
     return x, y
+
+
+def _numbers(v, who: str, name: str) -> np.ndarray:
+    try:
+        return np.asarray(v, dtype=float)
+    except (TypeError, ValueError) as exc:       # NumPy's own message names neither
+        raise ValueError(f"{who}: {name} must be numbers ({exc})") from None
+
+
+def _curve(curve, who: str, columns: tuple[str, ...]) -> pd.DataFrame:
+    """One run's curve table (a DataFrame, or columns by name), with rows and ``columns``."""
+    if not isinstance(curve, pd.DataFrame):
+        try:
+            curve = pd.DataFrame(curve)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{who}: expected one run's curve table (a DataFrame), got "
+                             f"{type(curve).__name__} ({exc})") from None
+    missing = [c for c in columns if c not in curve.columns]
+    if missing:
+        raise ValueError(f"{who}: the curve lacks the column{'s' if len(missing) > 1 else ''} "
+                         f"{', '.join(missing)} (one run's curve table has them)")
+    if len(curve) == 0:
+        raise ValueError(f"{who}: the curve has no rows")
+    return curve
 
 
 def _two_distinct(x: np.ndarray, who: str, name: str = "x") -> None:
@@ -634,7 +657,7 @@ def hysteresis(curve: pd.DataFrame) -> float:
     displacement control), so the loop closes with a drop at the jump: under force control
     the part of the unloading branch past the largest tension is never followed, and the
     hysteresis is smaller than under displacement control (1/64: 7.6e-5 against 1.25e-4)."""
-    curve = in_step_order(curve)
+    curve = in_step_order(_curve(curve, "hysteresis", ("indent", "force")))
     delta = np.concatenate([[0.0], curve["indent"].to_numpy(dtype=float)])
     force = np.concatenate([[0.0], curve["force"].to_numpy(dtype=float)])
     return float(np.sum(0.5 * (force[1:] + force[:-1]) * np.diff(delta)))
@@ -642,13 +665,13 @@ def hysteresis(curve: pd.DataFrame) -> float:
 
 def area_at_max_load(curve: pd.DataFrame) -> float:
     """Contact area at the step of largest compressive force (the end of loading)."""
+    curve = _curve(curve, "area_at_max_load", ("force", "contact_area"))
     return float(curve["contact_area"].iloc[int(np.argmax(curve["force"].to_numpy()))])
 
 
 def run_metrics(curve: pd.DataFrame) -> dict:
     """Pull-off force, hysteresis and contact area at maximum load of one run's curve."""
-    if len(curve) == 0:
-        raise ValueError("run_metrics: the curve has no rows")
+    curve = _curve(curve, "run_metrics", ("indent", "force", "contact_area"))
     tension = -float(curve["force"].min())
     return {"pull_off_force": tension if tension > 0 else 0.0,     # never -0.0 (a run without adhesion)
             "hysteresis": hysteresis(curve),
