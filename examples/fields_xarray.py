@@ -53,8 +53,10 @@ def main(out: Path) -> None:
     ax2.set_xlabel("force P (compression > 0)")
     ax2.set_ylabel("contact radius a")
     ax2.set_title("(b) contact radius")
-    ax2.legend(frameon=False)
-    ax2.ticklabel_format(axis="x", style="sci", scilimits=(-2, 2))
+    # the corner the loop leaves free (by default the legend sat on the curve)
+    ax2.legend(frameon=False, loc="lower right", fontsize="small")
+    ax2.ticklabel_format(axis="x", style="sci", scilimits=(-2, 2), useMathText=True)   # x10^-3, as tfm's figures
+    ax2.margins(y=0.08)                              # the plateau off the frame
     ax2.xaxis.set_major_locator(MaxNLocator(5))
     fold_offsets(fig)                                # the common factors into the axis labels
     fig.savefig(out / "fields.png", dpi=150)

@@ -192,7 +192,12 @@ def run_caption(p) -> str:
         parts.append(f"{p.layout} layout")
     if p.operator != "fft":
         parts.append(f"{p.operator} operator" + (f" ($\\theta$ = {p.theta:g})" if p.operator == "tree" else ""))
-    parts += [f"{name} = {number(v) if isinstance(v, float) else v}" for name, v in _other_settings(p)]
+    from .units import COLUMN_UNITS
+
+    dims = COLUMN_UNITS["paper"]["parameters"]      # which settings are lengths or forces
+    unit = {"length": m, "force": N}
+    parts += [f"{name} = {number(v) if isinstance(v, float) else v}{unit.get(dims.get(name), '')}"
+              for name, v in _other_settings(p)]
     return ", ".join(parts)
 
 
@@ -479,7 +484,7 @@ class ContactMap:
                 # the threshold's name at its tick, its value above the bar: a long tick
                 # label pushed the bar's label far from the bar
                 labels += [number(0.5 * hi, 2), name]
-                cb.ax.set_title(f"{name} = {number(hi, 2)}", fontsize="small", loc="left")
+                cb.ax.set_title(f"{name} = {number(hi, 2)}{unit_suffixes(params)[1]}", fontsize="small", loc="left")
                 cb.ax.axhline(hi, color="k", lw=1.5)
             cb.set_ticks(ticks, labels=labels)
 
