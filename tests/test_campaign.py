@@ -895,9 +895,11 @@ def test_killing_the_campaign_stops_its_workers(tmp_path):
     assert not alive, f"{len(alive)} workers outlived the campaign"
 
 
-def test_the_pool_blames_the_run_whose_worker_died_and_finishes_the_rest():
+def test_the_pool_blames_the_run_whose_worker_died_and_finishes_the_rest(capsys):
     """In process: one run kills its own worker mid-run; it fails with the cause, the
-    others (in flight on the other worker, or not yet started) finish in a rebuilt pool."""
+    others (in flight on the other worker, or not yet started) finish in a rebuilt pool.
+    The parent says so: the other worker's "stopping ... to save the run's state" lines
+    read as if the campaign were stopping (a user's hunt)."""
     from killers import KillsItsWorker
 
     from tfm.campaign.runner import _run_pool
@@ -907,7 +909,8 @@ def test_the_pool_blames_the_run_whose_worker_died_and_finishes_the_rest():
     killer = Run(index=9, params=KillsItsWorker())
     outcomes = {run.run_id: outcome for run, outcome in _run_pool([killer, *good], jobs=2)}
     assert set(outcomes) == {killer.run_id, *(r.run_id for r in good)}
-    assert "WorkerDied" in outcomes[killer.run_id].error and "SIGKILL" in outcomes[killer.run_id].error
+    assert "WorkerDied" in outcomes[killer.run_id].error and "was killed by SIGKILL" in outcomes[killer.run_id].error
+    assert f"tfm: the worker running {killer.run_id} (pid " in capsys.readouterr().err
     for run in good:
         assert outcomes[run.run_id].result is not None, outcomes[run.run_id].error
         assert outcomes[run.run_id].result.params.run_id == run.run_id
@@ -1042,8 +1045,7 @@ def test_status_says_when_the_tables_do_not_hold_the_stored_runs(tmp_path, capsy
     capsys.readouterr()
     assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "2 done" in out and ("the tables (summary, curves, failures) do not hold these runs as stored "
-                                "(no readable summary table)") in out
+    assert "2 done" in out and "the tables (summary, curves, failures) are out of date: no readable summary table" in out
     # the command it gives keeps the results folder (without it: a fresh campaign in results/)
     assert f"`tfm campaign run {toml} --results-dir {tmp_path}` rebuilds them" in out
     # while a campaign process holds the folder, that is what status says (it said the
@@ -1051,14 +1053,18 @@ def test_status_says_when_the_tables_do_not_hold_the_stored_runs(tmp_path, capsy
     with store.lock():
         assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert f"pid {os.getpid()} on" in out and "is running this campaign now" in out and "do not hold" not in out
+    assert f"pid {os.getpid()} on" in out and "is running this campaign now" in out and "out of date" not in out
     run_campaign(spec, quiet=True, results_dir=tmp_path)      # the same command rebuilds them
     assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
-    assert "do not hold" not in capsys.readouterr().out and store.table_path("summary").exists()
+    assert "out of date" not in capsys.readouterr().out and store.table_path("summary").exists()
     # a run file rewritten after the tables were
     store.run_path(spec.runs[0].run_id).touch()
     assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
-    assert "(run files have changed since they were written" in capsys.readouterr().out
+    assert "out of date: run files have changed since they were written" in capsys.readouterr().out
+    # a damaged run file: that run is pending again (it said "runs were stored after ...")
+    store.run_path(spec.runs[0].run_id).write_bytes(b"cut short")
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    assert "out of date: they hold runs whose files are now gone or damaged" in capsys.readouterr().out
 
 
 def test_status_says_when_the_campaign_file_was_edited(tmp_path, capsys):
@@ -1070,7 +1076,14 @@ def test_status_says_when_the_campaign_file_was_edited(tmp_path, capsys):
     capsys.readouterr()
     assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "1 pending" in out and "(the campaign file has changed since they were written)" in out
+    assert "1 pending" in out and "out of date: the campaign file has changed since they were written" in out
+    # every run pending after a base edit: the tables on disk still hold the old rows, and
+    # status said nothing of them, only that those runs were "left out of the tables"
+    toml.write_text(toml.read_text().replace("k_th = 0.02", "k_th = 0.03"))
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "0 done" in out and "3 pending" in out and "out of date: the campaign file has changed" in out
+    assert "left out of the tables when they are next built" in out
 
 
 def test_a_stop_signal_after_the_last_run_is_not_an_interruption(tmp_path, monkeypatch, capsys):

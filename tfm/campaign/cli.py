@@ -154,8 +154,9 @@ def cmd_status(args) -> int:
     holder = store.running()
     if holder:
         print(f"  {holder} is running this campaign now: the tables are rebuilt when it finishes")
-    elif (st.done or st.failed) and (behind := store.tables_behind(spec, st)):
-        print(f"  the tables (summary, curves, failures) do not hold these runs as stored ({behind}): "
+    elif (st.done or st.failed or store.table_path("summary").exists()) and (behind := store.tables_behind(spec, st)):
+        # with every run pending after an edit, the tables on disk still held the old rows
+        print(f"  the tables (summary, curves, failures) are out of date: {behind}; "
               f"`{store.run_command(args.file)}` rebuilds them")
     saved = _checkpoints(store, st.pending + st.failed)
     if saved:

@@ -485,7 +485,7 @@ def _death(exitcode) -> str:
         except ValueError:
             name = f"signal {-exitcode}"
         hint = " (the kernel's out-of-memory killer sends SIGKILL)" if name == "SIGKILL" else ""
-        return f"killed by {name}{hint}"
+        return f"was killed by {name}{hint}"
     return f"exited with status {exitcode}"
 
 
@@ -556,6 +556,11 @@ def _run_pool(todo: list[Run], jobs: int, ckpt=None,
             if rid in remaining and proc.exitcode not in (0, -15, None):   # -15: the pool's SIGTERM
                 pinned = True
                 run = remaining.pop(rid)
+                # the pool's SIGTERM made the other workers say they stop: say why, and that
+                # their runs go on
+                again = "continue from their checkpoints" if ckpt is not None else "start again"
+                print(f"tfm: the worker running {rid} (pid {pid}) {_death(proc.exitcode)}; that run "
+                      f"fails, the pool is restarted and the runs in flight {again}", file=sys.stderr, flush=True)
                 yield run, Outcome(error=f"WorkerDied: the worker process (pid {pid}) running this "
                                          f"run {_death(proc.exitcode)}",
                                    traceback=f"worker pid {pid} {_death(proc.exitcode)} while running "

@@ -315,8 +315,9 @@ class CampaignStore:
         n = len(status.extra)
         return (f"{n} stored run{'s' if n > 1 else ''} in {self.root} {'are' if n > 1 else 'is'} not in the "
                 f"campaign file now (values removed from it, or a height map's content changed: its hash is "
-                f"in the run id?): kept on disk in {self.runs_dir.name}/ or {self.failures_dir.name}/, left out "
-                "of the tables; put the values (or the map) back to have them in the tables again")
+                f"in the run id?): kept on disk in {self.runs_dir.name}/ or {self.failures_dir.name}/, and left out "
+                "of the tables when they are next built; put the values (or the map) back to have them in "
+                "the tables again")
 
     # ---- campaign tables ---------------------------------------------------
     def write_tables(self, spec: CampaignSpec, status: Status | None = None) -> bool:
@@ -392,9 +393,15 @@ class CampaignStore:
         if not isinstance(written, dict):
             return "no readable summary table"
         if written.get("sha256") != record["sha256"]:
-            return "the campaign file has changed since they were written"
+            return "the campaign file has changed since they were written, and they hold the runs of the file as it was"
+        then = set(written.get("run_ids") or []) | set(written.get("failed") or [])
+        now = set(record["run_ids"]) | set(record["failed"])
+        if now - then:
+            return "runs were stored after they were written, by a campaign process that stopped before rebuilding them"
+        if then - now:
+            return "they hold runs whose files are now gone or damaged (those runs are pending again)"
         if (written.get("run_ids"), written.get("failed")) != (record["run_ids"], record["failed"]):
-            return "runs were stored after they were written (the campaign process stopped before it rebuilt them)"
+            return "runs have moved between done and failed since they were written"
         return "run files have changed since they were written (or were copied without their times)"
 
     def _files_digest(self, status: Status) -> str:
