@@ -689,7 +689,7 @@ def _validate(p: Params) -> None:
     # under force control with a max_load the depth is that load's (Hertz or punch)
     depth = _depth_text(p, dmax)
     if p.step > dmax:
-        fix = "; lower step or raise max_load" if p.control == "force" else ""
+        fix = "; lower step or raise max_load" if p.control == "force" and p.max_load is not None else ""
         raise ParameterError(f"step: must be <= {depth}, got {p.step!r}{fix}")
     if dmax / p.step > MAX_STEPS:
         raise ParameterError(f"step: {depth} / step = {dmax / p.step:.3g} steps; must be <= {MAX_STEPS:g}")
