@@ -28,7 +28,7 @@ PARAM_HELP = {
     "neighbor_rings": "kernel=neighbors: keep 1/r for r <= m * spacing (with self_term 3.8, m >= 2 is "
                       "needed for a positive definite compliance; the default 1 goes with a larger self_term)",
     "c_w": "kernel=local: Winkler compliance, C_ii = c_w / A",
-    "operator": "fft | direct | tree",
+    "operator": "fft | direct | tree (kernels boussinesq and neighbors; the local kernel is a diagonal)",
     "theta": "operator=tree: opening angle (0, 1]",
     "layout": "square | hexagonal | jittered",
     "jitter": "layout=jittered: offsets in spacings, [0, 0.5)",
