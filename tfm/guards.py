@@ -187,8 +187,7 @@ def estimate_memory(p) -> float:
     plus the field snapshots' buffers, plus the Python/NumPy/SciPy/Numba runtime.
     """
     n = n_springs(p)
-    # every local run takes the neighbour-list path (tfm.operators.make_operator)
-    total = BASELINE_BYTES + BYTES_PER_SPRING["tree" if p.kernel == "local" else p.operator] * n
+    total = BASELINE_BYTES + BYTES_PER_SPRING[p.operator_used] * n
     if p.layout == "square":          # the full-grid symbol is built for every kernel
         side = int(round(math.sqrt(n)))
         P = _next_fast_len(2 * side - 1)
@@ -306,7 +305,7 @@ def _direct_work(p) -> float:
 def direct_cost_estimate(p) -> float | None:
     """Rough wall time of a direct-sum run in seconds (None for other operators and the
     local kernel, whose sum is a diagonal), scaled from DIRECT_REFERENCE."""
-    if p.operator != "direct" or p.kernel == "local":
+    if p.operator_used != "direct":
         return None
     return DIRECT_REFERENCE_SECONDS * _direct_work(p) / _direct_work(Params(**DIRECT_REFERENCE))
 

@@ -165,25 +165,21 @@ DATA_CLASSES = (FFTData, DirectData, TreeData, SparseData)
 
 def compiled_data_name(p: Params) -> str:
     """The class name of ``make_operator(p, ...).compiled()``: the tree operator hands a
-    neighbour list (SparseData) to the loop for the short-ranged kernels, and every local
-    run is one (with no neighbours)."""
-    if p.kernel == "local":
-        return SparseData.__name__
-    if p.operator == "fft":
+    neighbour list (SparseData) to the loop for the short-ranged kernels (the local one's
+    with no neighbours)."""
+    if p.operator_used == "fft":
         return FFTData.__name__
-    if p.operator == "direct":
+    if p.operator_used == "direct":
         return DirectData.__name__
     return (TreeData if p.kernel == "boussinesq" else SparseData).__name__
 
 
 def make_operator(p: Params, spec: KernelSpec, layout: Layout, symbol=None):
-    from .tree_operator import TreeOperator
-    if spec.kind == LOCAL:       # a diagonal: the neighbour-list path with no neighbours, any layout
-        return TreeOperator(spec, layout)
-    if p.operator == "fft":
+    if p.operator_used == "fft":
         return FFTOperator(spec, layout, symbol)
-    if p.operator == "direct":
+    if p.operator_used == "direct":
         return DirectOperator(spec, layout)
+    from .tree_operator import TreeOperator
     return TreeOperator(spec, layout, theta=p.theta)
 
 

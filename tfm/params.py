@@ -197,6 +197,13 @@ class Params:
         return float(preload_force(self.shape, self.delta_max, self.radius)) * force_scale(self)
 
     @property
+    def operator_used(self) -> str:
+        """The operator that computes C F: ``operator``, except for the local kernel, a
+        diagonal, which takes the tree operator's neighbour-list path with no neighbours
+        (O(N) on any layout; ``operator`` does not apply there)."""
+        return "tree" if self.kernel == "local" else self.operator
+
+    @property
     def load_decrement(self) -> float:
         """control="force": the load step, resolving ``load_step=None``."""
         return float(self.load_step) if self.load_step is not None else self.peak_load / 100.0
@@ -460,8 +467,7 @@ APPLIES: dict[str, Applies] = {
     # the tree serves the long-range kernel only (local and neighbors sums are exact)
     "theta": Applies("operator='tree' and kernel='boussinesq'",
                      lambda p: p.operator == "tree" and p.kernel == "boussinesq"),
-    # the Winkler kernel is a diagonal: it has no sum for an operator to compute (its runs
-    # take the neighbour-list path with no neighbours, O(N) on any layout)
+    # the Winkler kernel is a diagonal: no sum for an operator to compute (Params.operator_used)
     "operator": Applies("kernel is 'boussinesq' or 'neighbors' (the local kernel is a diagonal, "
                         "computed alike on every layout)", lambda p: p.kernel != "local"),
     "jitter": Applies("layout='jittered'", lambda p: p.layout == "jittered"),
@@ -719,7 +725,7 @@ def _validate(p: Params) -> None:
                              f"the limit is 8193 (shrink extent or enlarge spacing)")
     if p.kernel == "neighbors" and p.layout != "square":
         raise ParameterError("kernel: 'neighbors' counts rings of the square grid; use layout='square'")
-    if p.operator == "fft" and p.layout != "square" and p.kernel != "local":
+    if p.operator_used == "fft" and p.layout != "square":
         raise ParameterError(f"operator: 'fft' needs a regular square grid, but layout={p.layout!r}; "
                              "use operator='tree' or 'direct'")
     if p.preconditioner in ("stencil", "fft") and p.layout != "square":

@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import LogFormatter, MaxNLocator, ScalarFormatter
 
 from . import theory
-from .units import force_scale, unit_suffixes
+from .units import COLUMN_UNITS, force_scale, unit_suffixes
 
 PHASE_COLOURS = {"load": "tab:blue", "unload": "tab:red"}
 SPACING_COLOURS = ("tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink")
@@ -192,8 +192,6 @@ def run_caption(p) -> str:
         parts.append(f"{p.layout} layout")
     if p.operator != "fft":
         parts.append(f"{p.operator} operator" + (f" ($\\theta$ = {p.theta:g})" if p.operator == "tree" else ""))
-    from .units import COLUMN_UNITS
-
     dims = COLUMN_UNITS["paper"]["parameters"]      # which settings are lengths or forces
     unit = {"length": m, "force": N}
     parts += [f"{name} = {number(v) if isinstance(v, float) else v}{unit.get(dims.get(name), '')}"
