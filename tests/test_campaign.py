@@ -952,6 +952,8 @@ def test_a_capped_auto_preload_is_said_before_a_campaign_runs(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.index("auto preload capped") < err.index("campaign capped: 1 runs done")
     assert load_tables(root)[0]["status"].tolist() == ["flagged"]
+    run_campaign(spec, results_dir=tmp_path / "quiet", quiet=True)   # a warning stays with -q (its help says so)
+    assert "auto preload capped" in capsys.readouterr().err
 
 
 def test_where_computes_only_the_selected_runs_and_resumes_the_rest(tmp_path, capsys):
@@ -1192,7 +1194,7 @@ def test_runs_removed_from_the_file_are_reported_not_dropped_silently(tmp_path, 
     assert tfm_main(["campaign", "run", str(toml), "-q", *args]) == 0
     toml.write_text(toml.read_text().replace("alpha = [0.5, 0.75]", "alpha = [0.5]"))
     capsys.readouterr()
-    assert tfm_main(["campaign", "run", str(toml), *args]) == 0
+    assert tfm_main(["campaign", "run", str(toml), "-q", *args]) == 0     # said even with -q: rows leave the tables
     err = capsys.readouterr().err
     assert "1 stored run in" in err and "is not in the campaign file now" in err
     assert "or a height map's content changed" in err   # the other way a run id leaves the file

@@ -30,8 +30,9 @@ def register(subparsers) -> None:
     run.add_argument("--scheduler", metavar="ADDR", default=None,
                      help="run on a Dask distributed cluster, e.g. tcp://host:8786")
     run.add_argument("-q", "--quiet", action="store_true",
-                     help="no progress bar or closing line (the bar is also off when CI=true); "
-                          "warnings, errors and the lines of a stop signal stay")
+                     help="no progress bar, no line per failed run and no closing line (the bar is also off "
+                          "when CI=true); warnings, the count of failed runs and the lines of a stop "
+                          "signal stay")
     run.add_argument("--results-dir", default=RESULTS_DIR, help="parent of results/<name>/ (default results)")
     run.add_argument("--skip-failed", action="store_true",
                      help="do not retry runs that failed before")
@@ -114,7 +115,7 @@ def cmd_run(args) -> int:
         say(f"tfm: {str(exc) or 'interrupted'}")
         return 128 + getattr(exc, "signum", signal.SIGINT)
     status = CampaignStore(root).status(spec)
-    if status.flagged and not args.quiet:
+    if status.flagged:                    # even with --quiet: a warning
         print(f"{len(status.flagged)} runs are flagged (see the r_warnings column of "
               f"{root / 'summary.parquet'})", file=sys.stderr)
     if status.failed:

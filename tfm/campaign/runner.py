@@ -173,7 +173,7 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
                       "by other tfm source code (prov_code_hash, a hash of its files; see prov_git_commit); "
                       "they are kept. Use --rerun-stale to recompute them.", file=sys.stderr)
         extra = store.extra_note(status)
-        if extra and not quiet:
+        if extra:                          # even with quiet: their rows leave the tables
             print(f"campaign {spec.name}: {extra}", file=sys.stderr)
         damaged = store.damaged_note(status)
         if damaged:                        # even with quiet: stored data were lost
@@ -194,7 +194,7 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
             print(f"campaign {spec.name}: {len(costly)} run{'s' if len(costly) > 1 else ''} of the direct sum "
                   f"may take long; the largest, run {run.index}: {note}", file=sys.stderr)
         noted = [run for run in todo if run.notes]
-        if noted and not quiet:
+        if noted:                            # warnings stay with quiet (its help says so)
             for run in noted[:3]:
                 print(f"warning: campaign {spec.name}: run {run.index}: {'; '.join(run.notes)}", file=sys.stderr)
             if len(noted) > 3:
@@ -293,7 +293,7 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
                 _storing(run, store, spec, lambda: store.write_run(run, outcome.result, outcome.fields_bytes))
                 prov = outcome.result.provenance
                 set_aside = prov.get("checkpoint_set_aside")
-                if set_aside and not quiet:
+                if set_aside:              # even with quiet: a warning
                     bar.write(f"warning: run {run.index} {run.run_id}: {set_aside}", file=sys.stderr)
                 if prov.get("checkpoint_failed_saves"):
                     # even with quiet: the run had no protection against a crash
