@@ -234,11 +234,12 @@ def test_limit_where_and_max_ratio_select_runs_in_both_campaigns():
         select_limit_runs(specs, None, ["self_term=9"])
 
 
-def test_kept_points_refit_without_run_files_and_are_not_computed_again(tmp_path):
+def test_kept_points_refit_without_run_files_and_are_not_computed_again(tmp_path, capsys):
     """The committed points table stands in for run files that are not here: a refit from
     it alone finds every point, writes the table back unchanged (exact floats), and a
     `tfm limit` over runs that have a kept point computes none of them. A row whose run id
-    the campaign no longer lists is dropped."""
+    the campaign no longer lists is not fitted but stays in the table, named on stderr (it
+    was dropped from the file without a word: an edited campaign file cost its points)."""
     import shutil
 
     import pandas as pd
@@ -257,14 +258,15 @@ def test_kept_points_refit_without_run_files_and_are_not_computed_again(tmp_path
     assert main(["limit", "--where", "self_term=3.8", "--max-ratio", "9", "--results-dir", str(results),
                  "--out", str(out), "-q"]) == 0
     assert not list(results.glob("*/runs/*"))             # nothing computed: both runs are kept
+    assert "1 kept point(s) match no run of the limit campaigns now" in capsys.readouterr().err
     text = (out / "REPORT.md").read_text()
-    assert "0 runs computed now" in text
+    assert "0 runs computed now" in text and "0000000000000000" not in text     # not fitted
     for source, count in kept["source"].value_counts().items():    # every row kept, with its source
         assert f"{count} from {source}" in text
     again = pd.read_csv(out / POINTS_FILE, dtype={"run_id": str}, keep_default_na=False)
     key = ["geometry", "run_id"]
     pd.testing.assert_frame_equal(again.sort_values(key).reset_index(drop=True),
-                                  kept.sort_values(key).reset_index(drop=True))
+                                  pd.concat([kept, stale]).sort_values(key).reset_index(drop=True))
 
 
 @pytest.mark.parametrize("self_term", [
@@ -448,12 +450,28 @@ def test_tfm_paper_exits_1_when_a_claim_does_not_hold(tmp_path, monkeypatch, cap
     assert ("expected at --quick's doubled spacings" in err) == quick
 
 
+def _cell(text: str, row: int, column: str, value: str) -> str:
+    """``text`` (a points table) with one cell replaced."""
+    import csv
+    import io
+
+    rows = list(csv.reader(io.StringIO(text)))
+    rows[row][rows[0].index(column)] = value
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(rows)
+    return buf.getvalue()
+
+
 @pytest.mark.parametrize("damage, match", [
     (lambda text: "", "cannot be read as a points table of tfm limit"),
     (lambda text: text + text.splitlines()[50] + "\n", r"runs \['[0-9a-f]{16}'\] appear more than once"),
     (lambda text: text.replace(text.splitlines()[1].split(",")[7], "x", 1),
-     "F_max must be a number > 0 on every row"),
+     "F_max must be a finite number > 0 on every row"),
     (lambda text: text.replace("step_bound", "step_bnd", 1), r"not a points table of tfm limit \(missing \['step_bound'\]\)"),
+    # a hand edit's empty or text cell was summed as a string or formatted as a number
+    (lambda text: _cell(text, 1, "wall_time", ""), r"wall_time must be a number >= 0 on every row; not on runs"),
+    (lambda text: _cell(text, 2, "step_bound", "abc"), r"step_bound must be a number >= 0 on every row \(or empty\)"),
+    (lambda text: _cell(text, 3, "F_max", "inf"), r"F_max must be a finite number > 0 on every row"),
 ])
 def test_a_damaged_points_table_is_refused_by_name(tmp_path, monkeypatch, capsys, damage, match):
     """A duplicated row of points.csv counted as a "deeper preload" pair of itself (preload
@@ -571,3 +589,93 @@ def test_tfm_limit_max_ratio_below_every_run_is_refused(capsys):
         select_limit_runs(specs, 5.0, [])
     with pytest.raises(CampaignError, match=r"no run that matches --where has a_c/Δ <= 5"):
         select_limit_runs(specs, 5.0, ["self_term=3.8"])
+
+
+def _limit_specs():
+    from tfm.paper.limit import LIMIT_CAMPAIGNS
+    from tfm.paper.run import load_spec_for
+
+    return {g: load_spec_for(stem) for g, stem in LIMIT_CAMPAIGNS}
+
+
+def test_a_kept_rows_parameters_are_its_runs_and_a_change_is_named():
+    """A hand-edited self term moved a point into another self term's fit (its interval
+    went from [0.895, 1.082] to [0.761, 1.480]) and was written back; the run id names the
+    run's whole record, so the run's values are used, and the difference is said."""
+    import pandas as pd
+
+    from tfm.paper.limit import POINTS_FILE, read_kept
+
+    committed = REPO / "results" / "limit" / POINTS_FILE
+    specs = _limit_specs()
+    clean, _, notes = read_kept(committed, specs)
+    assert notes == []
+    table = pd.read_csv(committed, dtype={"run_id": str}, keep_default_na=False)
+    table.loc[0, "self_term"] = 3.8 if table.loc[0, "self_term"] != 3.8 else 2.9732
+    table.loc[1, "max_indent"] = 0.001
+    import tempfile
+    with tempfile.TemporaryDirectory() as tmp:
+        edited = Path(tmp) / POINTS_FILE
+        table.to_csv(edited, index=False)
+        points, other, notes = read_kept(edited, specs)
+    assert len(other) == 0 and len(notes) == 1
+    assert "2 value(s) differ from the runs their run ids name" in notes[0] and "self_term" in notes[0]
+    pd.testing.assert_frame_equal(points.reset_index(drop=True), clean.reset_index(drop=True))
+
+
+def test_the_main_preload_is_the_campaigns_not_the_shallowest_point_at_hand():
+    """With only the deeper-preload runs at hand (`tfm limit --where max_indent=...` into a
+    fresh folder), they were reported and drawn as the main series."""
+    from tfm.paper.limit import POINTS_FILE, fit_all, kept_points, main_preloads
+
+    specs = _limit_specs()
+    points = kept_points(REPO / "results" / "limit" / POINTS_FILE, specs)
+    preloads = main_preloads(specs)
+    deep = points[~np.isclose(points["max_indent"], points["geometry"].map(preloads))]
+    assert len(deep) and len(deep) < len(points)
+    assert fit_all(deep, preloads) == []                  # no main point: nothing to fit
+    assert all(len(r.pairs) == 0 and len(r.points) for r in fit_all(deep))   # the fallback's view
+
+
+def test_a_partial_campaign_does_not_advise_changing_the_constants(tmp_path, monkeypatch):
+    """The points up to a/Δ = 32 (a staged `--max-ratio 32`) fit c∞ = 5.951 at 2.9732,
+    "stable", and the report said to update tfm.units.LIMIT_COEFFICIENTS to it; the whole
+    campaign (to 256) gives 5.634."""
+    import pandas as pd
+
+    from tfm.cli import main
+    from tfm.paper.limit import POINTS_FILE
+
+    p = pd.read_csv(REPO / "results" / "limit" / POINTS_FILE, dtype={"run_id": str}, keep_default_na=False)
+    out = tmp_path / "partial"
+    out.mkdir()
+    p[p["ratio"] < 33].to_csv(out / POINTS_FILE, index=False)
+    monkeypatch.chdir(tmp_path)
+    assert main(["limit", "--analyse-only", "--results-dir", str(tmp_path / "none"), "--out", str(out), "-q"]) == 0
+    text = (out / "REPORT.md").read_text()
+    assert "update `tfm.units.LIMIT_COEFFICIENTS`" not in text
+    assert "no reason to change the constants until the campaign is complete" in text
+
+
+def test_where_errors_of_both_campaigns_are_said_and_the_smallest_ratio_is_of_the_matching_runs():
+    from tfm.campaign import CampaignError
+    from tfm.paper.limit import select_limit_runs
+
+    specs = _limit_specs()
+    with pytest.raises(CampaignError) as err:
+        select_limit_runs(specs, None, ["shape=nothing"])
+    assert "limit_sphere" in str(err.value) and "limit_punch" in str(err.value)
+    with pytest.raises(CampaignError, match=r"no run that matches --where has a_c/Δ <= 16; the smallest is 25[0-9]"):
+        select_limit_runs(specs, 16.0, ["spacing=1/1340"])
+
+
+def test_tfm_limit_out_under_a_file_is_refused_before_any_run(tmp_path, monkeypatch, capsys):
+    from tfm.cli import main
+    from tfm.paper import run as paper_run
+
+    monkeypatch.setattr(paper_run, "run_specs", lambda *a, **k: pytest.fail("computed before --out was checked"))
+    (tmp_path / "f").write_text("")
+    assert main(["limit", "--max-ratio", "8", "--results-dir", str(tmp_path / "r"), "--out",
+                 str(tmp_path / "f" / "sub"), "-q"]) == 2
+    assert f"out: cannot make the folder {tmp_path / 'f' / 'sub'}: {tmp_path / 'f'} is not a folder" in \
+        capsys.readouterr().err

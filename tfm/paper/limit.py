@@ -19,6 +19,7 @@ import dataclasses
 import datetime as _dt
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -112,12 +113,27 @@ POINT_COLUMNS = ("geometry", "run_id", "self_term", "spacing", "ratio", "max_ind
 
 
 def kept_points(path: Path, specs: dict) -> pd.DataFrame:
-    """The kept points of ``path`` whose run ids the campaigns still list (others are
-    dropped: the campaign changed), with their coefficients recomputed from F_max."""
+    """The kept points of ``path`` whose run ids the campaigns still list, with their
+    parameters and coefficients taken from the runs (`read_kept` says what else it found)."""
+    return read_kept(path, specs)[0]
+
+
+# a run's record, not the table, says what the run was (its id is the record's hash)
+FROM_THE_RUN = ("self_term", "spacing", "max_indent", "step")
+
+
+def read_kept(path: Path, specs: dict) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
+    """(kept points of the campaigns' runs, rows of ``path`` that match no run now, notes).
+
+    A row is matched by run id and geometry; its parameter columns and coefficient are
+    then the run's (a hand-edited self term or preload moved a point between fits). Rows
+    that match no run (the campaign file changed) are not fitted, but they stay in the
+    table that `tfm limit` writes back: they may be hours of compute."""
     from ..params import ParameterError
 
+    empty = pd.DataFrame(columns=POINT_COLUMNS)
     if not path.exists():
-        return pd.DataFrame(columns=POINT_COLUMNS)
+        return empty, empty, []
     # a damaged table is refused by name: it gave pandas' and Python's tracebacks, and a
     # duplicated row counted as a "deeper preload" pair of itself (a 16240 % preload check)
     try:
@@ -128,22 +144,48 @@ def kept_points(path: Path, specs: dict) -> pd.DataFrame:
     if missing:
         raise ParameterError(f"{path}: not a points table of tfm limit (missing {sorted(missing)})")
     f_max = pd.to_numeric(kept["F_max"], errors="coerce")
-    if f_max.isna().any() or not (f_max > 0).all():
-        bad = kept["run_id"][f_max.isna() | ~(f_max > 0)].tolist()
-        raise ParameterError(f"{path}: F_max must be a number > 0 on every row; not on runs {bad[:5]}")
+    if not (np.isfinite(f_max) & (f_max > 0)).all():
+        bad = kept["run_id"][~(np.isfinite(f_max) & (f_max > 0))].tolist()
+        raise ParameterError(f"{path}: F_max must be a finite number > 0 on every row; not on runs {bad[:5]}")
     kept["F_max"] = f_max.astype(float)
+    # the results beside F_max: an empty wall_time (a hand edit) was summed as text
+    for column, allow_empty in (("wall_time", False), ("step_bound", True)):
+        text = kept[column].astype(str).str.strip()
+        blank = (text == "") if allow_empty else pd.Series(False, index=text.index)
+        value = pd.to_numeric(text, errors="coerce")          # "" -> NaN
+        bad = ~(np.isfinite(value) & (value >= 0)) & ~blank
+        if bad.any():
+            raise ParameterError(f"{path}: {column} must be a number >= 0 on every row"
+                                 + (" (or empty)" if allow_empty else "")
+                                 + f"; not on runs {kept['run_id'][bad].tolist()[:5]}")
+        kept[column] = value.astype(float)
     twice = kept["run_id"][kept["run_id"].duplicated()].unique().tolist()
     if twice:
         raise ParameterError(f"{path}: runs {twice[:5]} appear more than once; a points table holds one "
                              "row per run")
     runs = {run.run_id: (geometry, run) for geometry, spec in specs.items() for run in spec.runs}
-    rows = []
+    rows, other, moved = [], [], []
     for row in kept.to_dict("records"):
         if row["run_id"] in runs and runs[row["run_id"]][0] == row["geometry"]:
             p = runs[row["run_id"]][1].params
-            row.update(ratio=spec_ratio(p), y=coefficient(p, row["F_max"]))
+            truth = dict(self_term=p.self_term, spacing=p.spacing, max_indent=p.delta_max, step=p.step)
+            for key, value in truth.items():
+                given = pd.to_numeric(pd.Series([row[key]]), errors="coerce").iloc[0]
+                if not np.isclose(given, value, rtol=1e-9, atol=0.0):
+                    moved.append(f"{row['run_id']} {key} {row[key]!s} (the run's: {value:g})")
+            row.update(truth, ratio=spec_ratio(p), y=coefficient(p, row["F_max"]))
             rows.append(row)
-    return pd.DataFrame(rows, columns=POINT_COLUMNS)
+        else:
+            other.append(row)
+    notes = []
+    if moved:
+        notes.append(f"{path}: {len(moved)} value(s) differ from the runs their run ids name, and the runs' are "
+                     f"used: {'; '.join(moved[:3])}{' ...' if len(moved) > 3 else ''}")
+    if other:
+        notes.append(f"{path}: {len(other)} kept point(s) match no run of the limit campaigns now (a campaign "
+                     f"file changed?), e.g. {other[0]['geometry']} {other[0]['run_id']}: they are not fitted, "
+                     "and stay in the table written back")
+    return (pd.DataFrame(rows, columns=POINT_COLUMNS), pd.DataFrame(other, columns=POINT_COLUMNS), notes)
 
 
 def merge_points(stored: pd.DataFrame, kept: pd.DataFrame) -> pd.DataFrame:
@@ -157,15 +199,20 @@ def merge_points(stored: pd.DataFrame, kept: pd.DataFrame) -> pd.DataFrame:
 
 def write_points(path: Path, points: pd.DataFrame) -> None:
     """The points table (pandas writes each float as its shortest exact repr)."""
-    points[list(POINT_COLUMNS)].sort_values(["geometry", "self_term", "spacing", "max_indent"], ascending=[True, True, False, True]) \
-        .to_csv(path, index=False)
+    # numbers sorted as numbers even when a row that matches no run holds text
+    points[list(POINT_COLUMNS)].sort_values(
+        ["geometry", "self_term", "spacing", "max_indent"], ascending=[True, True, False, True],
+        key=lambda c: c if c.name == "geometry" else pd.to_numeric(c, errors="coerce")).to_csv(path, index=False)
 
 
-def split_preloads(points: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(points at the campaign's main, shallowest preload; preload-independence pairs)."""
+def split_preloads(points: pd.DataFrame, main_preload: float | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(points at the campaign's main, shallowest preload; preload-independence pairs).
+    ``main_preload``: the campaign's (`main_preloads`); without it, the shallowest point's,
+    which makes the deeper series the main one when only its points are at hand."""
     if points.empty:
         return points, pd.DataFrame()
-    main_preload = points["max_indent"].min()
+    if main_preload is None:
+        main_preload = points["max_indent"].min()
     main = points[np.isclose(points["max_indent"], main_preload)].sort_values(["self_term", "ratio"])
     deep = points[~np.isclose(points["max_indent"], main_preload)]
     pairs = deep.merge(main[["self_term", "spacing", "max_indent", "F_max"]], on=["self_term", "spacing"],
@@ -255,10 +302,25 @@ class LimitResult:
         return float(self.pairs["change"].abs().max()) if len(self.pairs) else math.nan
 
 
-def fit_all(points: pd.DataFrame) -> list[LimitResult]:
+def main_preloads(specs: dict) -> dict[str, float]:
+    """The main (shallowest) preload of each geometry's campaign."""
+    return {g: min(run.params.delta_max for run in spec.runs) for g, spec in specs.items()}
+
+
+def full_ratios(specs: dict) -> dict[str, float]:
+    """The largest a/Δ of each geometry's campaign at its main preload."""
+    main = main_preloads(specs)
+    return {g: max(spec_ratio(r.params) for r in spec.runs if math.isclose(r.params.delta_max, main[g]))
+            for g, spec in specs.items()}
+
+
+def fit_all(points: pd.DataFrame, preloads: dict[str, float] | None = None) -> list[LimitResult]:
+    """Fits per geometry and self term; ``preloads``: each campaign's main preload
+    (`main_preloads`), else the shallowest point's."""
     out = []
     for geometry, _ in LIMIT_CAMPAIGNS:
-        main, pairs = split_preloads(points[points["geometry"] == geometry] if len(points) else points)
+        main, pairs = split_preloads(points[points["geometry"] == geometry] if len(points) else points,
+                                     (preloads or {}).get(geometry))
         for st in sorted(set(main["self_term"])) if len(main) else []:
             pts = main[main["self_term"] == st]
             fit = analysis.fit_limit(pts["ratio"], pts["y"]) if len(pts) >= MIN_FIT_POINTS else None
@@ -329,24 +391,37 @@ def paper_ratio_range(results_dir=None) -> tuple[float, float, float]:
     return min(ratios), max(ratios), spec.runs[0].params.spacing
 
 
-def units_note(para) -> str:
-    """Whether tfm.units' "limit" coefficients are these fits (to the 3 decimals they keep)."""
+def units_note(para, full_ratio: float = math.inf) -> str:
+    """Whether tfm.units' "limit" coefficients are these fits (to the 3 decimals they keep).
+    ``full_ratio``: the largest a_c/Δ of the campaign; a fit short of it (a partial
+    campaign) is no reason to change the constants, which came from the whole range."""
     from ..units import LIMIT_COEFFICIENTS
     fitted = {r.self_term: (round(r.estimate[0], 3), r) for r in para
               if r.estimate[3] == "fit" and math.isfinite(r.estimate[0])}
     differ = {s: (c, r) for s, (c, r) in fitted.items() if LIMIT_COEFFICIENTS.get(s) != c}
-    # a constant in the code follows a fit only if that fit survives leaving out any point
+    whole = {s for s, (c, r) in fitted.items() if r.largest_ratio >= full_ratio * (1 - 1e-9)}
+    # a constant in the code follows a fit only if that fit covers the campaign's whole
+    # range and survives leaving out any point
     stale = [f"{s:g}: {LIMIT_COEFFICIENTS.get(s)} vs {c:.3f}" for s, (c, r) in differ.items()
-             if r.stability()["stable"]]
-    unsure = [f"{s:g}: {c:.3f}" for s, (c, r) in differ.items() if not r.stability()["stable"]]
-    used = ", ".join(f"{c:.3f} (self term {s:g})" for s, c in LIMIT_COEFFICIENTS.items())
+             if r.stability()["stable"] and s in whole]
+    partial = {s: (c, r) for s, (c, r) in differ.items() if r.stability()["stable"] and s not in whole}
+    unsure = [f"{s:g}: {c:.3f}" for s, (c, r) in partial.items()]
+    unstable = [f"{s:g}: {c:.3f}" for s, (c, r) in differ.items() if not r.stability()["stable"]]
+    shaky = [s for s, (c, r) in fitted.items() if s in LIMIT_COEFFICIENTS and not r.stability()["stable"]]
+    used = ", ".join(f"{c:.3f} (self term {s:g}" + (", a fit not stable without any one point: see Stability"
+                                                     if s in shaky else "") + ")"
+                     for s, c in LIMIT_COEFFICIENTS.items())
     if stale:
         return ("`k_th_coefficient = \"limit\"` still holds older values; update "
                 f"`tfm.units.LIMIT_COEFFICIENTS` ({'; '.join(stale)}).")
     text = (f"`k_th_coefficient = \"limit\"` derives K_th from γ with these fitted c∞: {used} "
             "(`tfm.units.LIMIT_COEFFICIENTS`; a record stores the number).")
     if unsure:
-        text += (f" These data fit other values ({'; '.join(unsure)}), but those fits are not shown "
+        text += (f" These data fit other values ({'; '.join(unsure)}), but only up to a_c/Δ = "
+                 f"{max(r.largest_ratio for c, r in partial.values()):.0f} of the campaign's "
+                 f"{full_ratio:.0f}: no reason to change the constants until the campaign is complete.")
+    if unstable:
+        text += (f" These data fit other values ({'; '.join(unstable)}), but those fits are not shown "
                  "stable without any one point (Stability), so they are no reason to change them.")
     return text
 
@@ -567,7 +642,7 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
     if same:
         lines += ["- **One lattice constant for both geometries?**"] + ["  " + s for s in same]
     if para:
-        lines.append("- **In SI runs** " + units_note(para))
+        lines.append("- **In SI runs** " + units_note(para, full_ratios(specs)["paraboloid"]))
     if not para:
         lines.append("- no paraboloid fit yet (fewer than "
                      f"{MIN_FIT_POINTS} points per self term).")
@@ -628,6 +703,15 @@ def _strict(value):
     return value if math.isfinite(value) else None
 
 
+def _selected(spec, where) -> list:
+    from ..campaign import CampaignError, select_runs
+
+    try:
+        return list(select_runs(spec, where))
+    except CampaignError:
+        return []
+
+
 def select_limit_runs(specs: dict, max_ratio: float | None, where) -> dict | None:
     """Run ids to compute now per geometry: a_c/Δ <= max_ratio and every KEY=VALUE of
     ``where`` (tfm.campaign.select_runs); None for all. A ``where`` that matches no run in
@@ -646,11 +730,13 @@ def select_limit_runs(specs: dict, max_ratio: float | None, where) -> dict | Non
                 errors.append(exc)
                 runs = ()
         only[geometry] = {r.run_id for r in runs if max_ratio is None or within_ratio(r.params, max_ratio)}
-    if len(errors) == len(specs):
-        raise errors[0]
+    if len(errors) == len(specs):         # each campaign's reason (the first alone hid the others)
+        raise CampaignError("; ".join(str(e) for e in errors)) if len(errors) > 1 else errors[0]
     if max_ratio is not None and not any(only.values()):
         # it said "nothing to run, 0 of 60 runs already done" and exited 0
-        smallest = min(spec_ratio(r.params) for spec in specs.values() for r in spec.runs)
+        matching = [r for g, spec in specs.items() for r in
+                    (spec.runs if not where else _selected(spec, where))]
+        smallest = min(spec_ratio(r.params) for r in matching)
         raise CampaignError(f"--max-ratio: no run{' that matches --where' if where else ''} has "
                             f"a_c/Δ <= {max_ratio:g}; the smallest is {smallest:.3g}")
     return only
@@ -679,6 +765,11 @@ def main_limit(args) -> int:
     out_dir = Path(args.out)
     if out_dir.exists() and not out_dir.is_dir():
         raise ParameterError(f"out: {out_dir} is a file, not a folder")
+    # before any run: a path under a file was found only after hours of compute
+    ancestor = next(a for a in (out_dir.absolute(), *out_dir.absolute().parents) if a.exists())
+    if ancestor != out_dir.absolute() and not (ancestor.is_dir() and os.access(ancestor, os.W_OK)):
+        raise ParameterError(f"out: cannot make the folder {out_dir}: {ancestor} is "
+                             + ("not a folder" if not ancestor.is_dir() else "not writable"))
     t0 = time.perf_counter()
     start_load = machine()["load"][0]
     results_dir = Path(args.results_dir)
@@ -692,7 +783,9 @@ def main_limit(args) -> int:
     if not source.exists() and (Path(DEFAULT_OUT) / POINTS_FILE).exists():
         source = Path(DEFAULT_OUT) / POINTS_FILE
         print(f"[tfm limit] {out_dir / POINTS_FILE} does not exist: kept points from {source}", file=sys.stderr)
-    kept = kept_points(source, specs)
+    kept, unmatched, notes = read_kept(source, specs)
+    for note in notes:                      # even with -q: they are about kept compute
+        print(f"[tfm limit] {note}", file=sys.stderr)
     only = select_limit_runs(specs, args.max_ratio, args.where)
     if not args.analyse_only:
         # a run with a kept point is not computed again
@@ -710,13 +803,14 @@ def main_limit(args) -> int:
         print(f"tfm limit: nothing to report: no run of the limit campaigns is stored in {results_dir} "
               f"and no kept point in {source}; run `tfm limit` to compute them", file=sys.stderr)
         return 1
-    results = fit_all(points)
+    results = fit_all(points, main_preloads(specs))
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ParameterError(f"out: cannot make the folder {out_dir}: {exc.strerror or exc}") from None
     if len(points):
-        write_points(out_dir / POINTS_FILE, points)
+        write_points(out_dir / POINTS_FILE, pd.concat([points, unmatched], ignore_index=True)
+                     if len(unmatched) else points)
     if results:
         plot_limit(results, out_dir / "limit.png")
     wall = time.perf_counter() - t0

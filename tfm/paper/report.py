@@ -305,7 +305,7 @@ def write_report(path: Path, runs: dict, res: Finding, figures: dict[str, str], 
         f"- wall time of this `{'tfm paper --quick' if quick else 'make paper'}`: **{wall / 60:.1f} min** "
         f"({wall:.0f} s) with `--jobs {jobs}`, "
         f"{total_runs} runs in {len(runs)} campaigns, {computed} of them computed by this invocation "
-        f"({'a full run from empty result folders' if computed == total_runs else 'the rest resumed from results/'}); "
+        f"({'a full run from empty result folders' if computed == total_runs else f'the rest resumed from {Path(results_dir).as_posix()}/'}); "
         f"the runs' own compute time adds up to {run_seconds:.0f} s (with each worker's first compilation of the "
         "kernels, 1-2 min after an install or a code change).",
         f"- machine: {m['nproc']} cores, {m['cpu']}, Python {m['python']}; load average "
