@@ -94,7 +94,7 @@ def test_the_applicability_table_names_real_fields():
     (dict(OK, step=0.0500005 / 10), "step", r"step: only 9.9999 loading steps"),
     (dict(OK, tol=1e-2), "tol", r"tol: 0.01 is looser than 1e-06"),
     (dict(OK, tol=1e-3), "tol", r"tol: 0.001 is looser"),
-    # 1e-4 passed, and moved the pull-off by a whole step (+0.95 % at 1/64, a user's check)
+    # 1e-4 passed, and moved the pull-off by a whole step (+0.94 % at 1/64, a user's check)
     (dict(OK, tol=1e-4), "tol", r"tol: 0.0001 is looser than 1e-06"),
     # a deep preload passes the count at maximum load, but the contact breaks near a_c = 0.191:
     # a_c / spacing = 1.53 (a_c^3 = 9 pi gamma R^2 / (8 E*), gamma = pi K^2 / 2, K = k_th at

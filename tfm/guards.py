@@ -26,9 +26,9 @@ alpha = 0.75, max_indent = 0.05; reference 3.19e-3 at spacing 1/256):
 - ``tol``: the CG tolerance. Snap and entry decisions compare forces and gaps with the
   threshold, so a loose solve flips them, and a flipped decision moves the pull-off by a
   whole step: against tol 1e-10 on the standard curve (step 2.5e-4), tol 1e-4 moved it by
-  +0.95 % at 1/64, +0.50 % at 1/128 and +0.56 % at 1/256; 3e-5 by +0.56 % at 1/256; 1e-5 by
-  at most 7.7e-7 and 1e-6 by at most 6.8e-8 from 1/32 to 1/256 (also with step 1e-3;
-  ``python -m bench.guards tol``, 2026-11-25). Earlier, with step 1e-3 at 1/64 only, 1e-4
+  +0.94 % at 1/64, +0.91 % at 1/128 and +0.56 % at 1/256 (+1.4 % with step 1e-3); 3e-5 by
+  +0.56 % at 1/256; 1e-5 by at most 7.4e-7 and 1e-6 by at most 8.1e-8 from 1/32 to 1/256
+  (also with step 1e-3; ``python -m bench.guards tol``, 2026-11-25, after the symbol's fix). Earlier, with step 1e-3 at 1/64 only, 1e-4
   had looked safe (3e-6), and 1e-4 was the limit until then.
 - ``memory``: the estimate below against the memory the machine has available now.
 - ``cost``: a direct-sum run whose estimated time (direct_cost_estimate, scaled from one
@@ -425,8 +425,8 @@ def check(p, memory: bool = True) -> list[str]:
                         f"{depth / MIN_LOADING_STEPS:.3g}" + (", or give max_indent" if auto else ""))
     if p.tol > MAX_TOL:
         _guard(notes, allowed, "tol", f"tol: {p.tol:g} is looser than {MAX_TOL:g}; snap and entry decisions then "
-                       "follow the solver error and can move the pull-off by a whole step (tol 1e-4: +0.95 % at "
-                       "spacing 1/64; 3e-5: +0.56 % at 1/256; 1e-2: -27 %)")
+                       "follow the solver error and can move the pull-off by a whole step (tol 1e-4: +0.94 % at "
+                       "spacing 1/64, +0.91 % at 1/128; 3e-5: +0.56 % at 1/256; 1e-2: -41 % at 1/128)")
     if memory:
         need, have = estimate_memory(p), available_memory()
         if have is not None and need > have:
