@@ -510,10 +510,28 @@ def test_surface_topography_file_in_si_units(tmp_path):
     lay = make_layout(p)
     assert lay.shape == (39, 39)          # centre pixel 19, 19 pixels on its short side
     x0 = heights(p, lay)
-    # the file stores its sizes in single precision: pixel = 1 um to 3e-8 relative, so the
-    # springs sit that close to the pixels and the heights match to about that
+    # the file stores its sizes in single precision, read back as the decimals written
+    # (_stored_decimal): the springs sit on the pixels, and the heights are the file's
+    # times 1e-6 (atol: the subtraction of the maximum rounds at 1e-22 m; 1e-12 is loose)
     expect = arr[0:39, 0:39].ravel() * 1e-6
     np.testing.assert_allclose(x0, expect - expect.max(), rtol=0, atol=1e-12)
+
+
+def test_a_single_precision_size_in_a_file_keeps_the_whole_grid(tmp_path):
+    """65 x 65 pixels of 1 mm in a NetCDF file: its size came back as 0.064999998 m, the
+    pixel 4e-8 short of the 1 mm spacing, and the grid had 63 springs a side where the same
+    heights in a .npy with map_pixel_size 1e-3 have 65, with no note and no edge flag."""
+    st = pytest.importorskip("SurfaceTopography")
+    arr = np.random.default_rng(3).normal(size=(65, 65)) * 1e-6
+    st.Topography(arr, (65e-3, 65e-3), unit="m").to_netcdf(str(tmp_path / "m.nc"))
+    np.save(tmp_path / "m.npy", arr)
+    common = dict(units="si", youngs_modulus=1e6, poisson_ratio=0.5, f_th=0.0, shape="height_map",
+                  spacing=1e-3, max_indent=1e-6, step=1e-7)
+    from_file = Params(height_map=str(tmp_path / "m.nc"), **common)
+    from_npy = Params(height_map=str(tmp_path / "m.npy"), map_pixel_size=1e-3, **common)
+    assert make_layout(from_file).shape == make_layout(from_npy).shape == (65, 65)
+    np.testing.assert_array_equal(heights(from_file, make_layout(from_file)),
+                                  heights(from_npy, make_layout(from_npy)))
 
 
 def test_text_maps_are_read_as_heights_and_unknown_formats_named_briefly(tmp_path):

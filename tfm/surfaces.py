@@ -389,7 +389,7 @@ def _read_with_surface_topography(file: Path):
         raise MapError(f"height_map: {str(file)!r} is a line scan, not a 2-D map")
     if not sized:
         return np.asarray(topo.heights()), None, None
-    sx, sy = topo.physical_sizes
+    sx, sy = (_stored_decimal(v) for v in topo.physical_sizes)
     nx, ny = topo.nb_grid_pts
     if not math.isclose(sx / nx, sy / ny, rel_tol=1e-9):
         raise MapError(f"height_map: pixels must be square, got {sx / nx:g} x {sy / ny:g}")
@@ -404,6 +404,17 @@ def _read_with_surface_topography(file: Path):
         warnings.warn(f"height_map: {str(file)!r} gives its size ({sx:g} x {sy:g}) but no length unit; its sizes "
                       "and heights are taken in metres (in paper units, in L*)", MapUnitWarning, stacklevel=2)
     return np.asarray(heights), sx / nx, unit
+
+
+def _stored_decimal(size: float) -> float:
+    """A file's size as the decimal it was written as. SurfaceTopography's NetCDF keeps
+    sizes in single precision: 65 mm came back as 0.064999998 m, a pixel 4e-8 short of
+    the 1 mm spacing, and the grid lost its outer ring of springs without a note. A value
+    that is exactly a single-precision number is read as the shortest decimal that rounds
+    to it (a change below 6e-8 relative); any other value is kept as it is."""
+    size = float(size)
+    single = np.float32(size)
+    return float(str(single)) if np.isfinite(single) and float(single) == size else size
 
 
 def map_pixel(p, hm: HeightMap) -> float:
