@@ -619,6 +619,15 @@ def test_a_steep_surface_given_by_its_rms_height_is_flagged(tmp_path):
                for n in guards.check(p, memory=False))
     # scaled down tenfold: the same surface, a tenth of the slope, no flag
     assert not any("rms slope" in n for n in guards.check(p.replace(rms_height=0.01), memory=False))
+    # heights whose squares overflow: the slope was NaN, which passed the check, with
+    # NumPy's overflow warnings; it is now measured (1e301: the 0.1 surface's times 1e301)
+    # and flagged, without them
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        notes = guards.check(p.replace(rms_height=1e300), memory=False)
+    huge = f"rms_height: the 1e+300 rms height surface's rms slope is {expected * 1e301:.3g}, steeper"
+    assert any(n.startswith(huge) for n in notes), notes
     # a flat map with roughness on top: the roughness' slope counts
     flat = _map(tmp_path, "flat.npy", array=np.zeros((65, 65)))
     mk = dict(shape="height_map", height_map=flat, map_pixel_size=1 / 64, spacing=1 / 64, f_th=0.0,

@@ -152,8 +152,14 @@ def spectral_rms_slope(h: np.ndarray, spacing: float) -> float:
     """sqrt(<|grad h|^2>) from the Fourier coefficients of a periodic square map."""
     n = h.shape[0]
     q = wavevectors(n, spacing)
-    H = np.fft.fft2(h - h.mean())
-    return math.sqrt(float((q ** 2 * np.abs(H) ** 2).sum())) / (n * n)
+    dev = h - h.mean()
+    # in units of the largest deviation: rms_height 1e300 overflowed the squares to NaN,
+    # which passed the steep-surface check (inf, which it flags, is what such heights give)
+    scale = float(np.abs(dev).max()) if dev.size else 0.0
+    if not 0.0 < scale < math.inf:
+        return 0.0 if scale == 0.0 else math.inf
+    H = np.fft.fft2(dev / scale)
+    return scale * math.sqrt(float((q ** 2 * np.abs(H) ** 2).sum())) / (n * n)
 
 
 def radial_psd(h: np.ndarray, spacing: float, nbins: int | None = None):
