@@ -369,6 +369,10 @@ def test_loose_input_reads_choices_case_blind():
         "height_map", "height_map_hash", "allow"}
     with pytest.raises(ParameterError, match=r"units: unknown value 'S I'"):
         Params.from_dict(dict(units="S I"))
+    # k_th_coefficient's names too ('JKR' was refused with "did you mean 'jkr'?")
+    for name in ("JKR", " Paper ", "LIMIT"):
+        named = Params.from_dict(dict(si, k_th_coefficient=name))
+        assert named == Params.from_dict(dict(si, k_th_coefficient=name.strip().lower()))
 
 
 def test_minus_zero_is_the_same_run_as_zero():

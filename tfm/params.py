@@ -558,6 +558,9 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
                                      "JKR estimate asks for) or a depth such as 0.05 or 1/20") from None
         if key == "k_th_coefficient":
             from .units import K_TH_COEFFICIENTS
+            names = tuple(K_TH_COEFFICIENTS) + ("limit",)
+            if isinstance(value, str) and value.strip().lower() in names:
+                return value.strip().lower()      # case-blind, as the other names ("JKR")
             if isinstance(value, str) and value not in K_TH_COEFFICIENTS:
                 try:
                     return parse_number(value, key)
