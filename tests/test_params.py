@@ -371,8 +371,8 @@ def test_loose_input_reads_choices_case_blind():
         Params.from_dict(dict(units="S I"))
     # k_th_coefficient's names too ('JKR' was refused with "did you mean 'jkr'?")
     for name in ("JKR", " Paper ", "LIMIT"):
-        named = Params.from_dict(dict(si, k_th_coefficient=name))
-        assert named == Params.from_dict(dict(si, k_th_coefficient=name.strip().lower()))
+        named = Params.from_dict(dict(si, units="si", k_th_coefficient=name))
+        assert named == Params.from_dict(dict(si, units="si", k_th_coefficient=name.strip().lower()))
 
 
 def test_minus_zero_is_the_same_run_as_zero():
