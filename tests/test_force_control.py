@@ -220,6 +220,10 @@ def test_force_control_on_a_height_map_is_refused(tmp_path):
     with pytest.raises(ParameterError, match="control: 'force' is not available for shape='height_map'"):
         Params(shape="height_map", height_map=str(m), spacing=1 / 32, f_th=0.0, alpha=0.0, control="force",
                max_indent=0.01, step=1e-3)
+    # with a max_load too: "leave max_indent 'auto'" came first and led only to this refusal
+    with pytest.raises(ParameterError, match="control: 'force' is not available for shape='height_map'"):
+        Params(shape="height_map", height_map=str(m), spacing=1 / 32, f_th=0.0, alpha=0.0, control="force",
+               max_load=1e-3, max_indent=0.01, step=1e-3)
 
 
 def test_the_run_header_counts_the_flats_moves_under_force_control(capsys, tmp_path):

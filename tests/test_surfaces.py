@@ -420,6 +420,9 @@ def test_threshold_forces_carry_the_disorder():
         Params(f_th=2e-4, threshold_disorder="uniform", disorder_width=0.7)
     with pytest.raises(ParameterError, match="threshold_disorder: unknown value"):
         Params(threshold_disorder="gauss", disorder_width=0.1)
+    # no width given: said so ("must be in [0.015, 2] ... got 0.0" read as a bad zero)
+    with pytest.raises(ParameterError, match=r"disorder_width: required with threshold_disorder='weibull'"):
+        Params(f_th=2e-4, threshold_disorder="weibull")
     assert Params.from_dict({"threshold_disorder": None}).threshold_disorder == "none"
 
 
@@ -602,6 +605,25 @@ def test_a_steep_surface_is_flagged_before_the_run(tmp_path):
                                                           step=1e-3, rms_slope=2.0))))
 
 
+def test_a_paraboloid_pressed_deeper_than_its_radius_is_flagged():
+    """An SI run given the paper's max_indent 0.05 for a 1 mm paraboloid (50 R deep, an
+    11 GiB run) started with no word; a sphere that deep is refused by its geometry."""
+    from tfm import guards
+
+    si = dict(units="si", youngs_modulus=1e6, poisson_ratio=0.5, work_of_adhesion=0.05, shape="paraboloid",
+              radius=1e-3, spacing=2e-5, step=1e-3)
+    notes = guards.check(Params.from_dict(dict(si, max_indent=0.05)), memory=False)
+    assert any(n.startswith("max_indent: 0.05 m is deeper than the paraboloid's radius 0.001 m: its slope at the "
+                            "Hertz contact edge, sqrt(max_indent/R) = 7.07") and "paper-unit values" in n
+               for n in notes), notes
+    # the slope of the edge is sqrt(max_indent / R): at R deep it is 1, not flagged
+    paper = dict(shape="paraboloid", f_th=0.0, radius=0.1, spacing=1 / 64, step=1e-3)
+    assert not any(n.startswith("max_indent") for n in guards.check(Params.from_dict(dict(paper, max_indent=0.1)),
+                                                                    memory=False))
+    assert any(n.startswith("max_indent: 0.2 is deeper than the paraboloid's radius 0.1: its slope") and
+               "paper-unit" not in n for n in guards.check(Params.from_dict(dict(paper, max_indent=0.2)), memory=False))
+
+
 def test_a_steep_surface_given_by_its_rms_height_is_flagged(tmp_path):
     """The steepness flag read rms_slope only: an rms_height of 0.1 at 1/32 (spectral rms
     slope 1.5) ran with no word, and so did roughness added to a height map. The slope is
@@ -686,7 +708,7 @@ def test_a_pixel_size_over_a_files_own_is_refused(tmp_path):
         Params(f_th=0.0, shape="height_map", height_map=path, spacing=1 / 32, map_pixel_size=1 / 32,
                max_indent=0.01, step=1e-3)
     # without it, the message says how the file's pixel was taken
-    with pytest.raises(ParameterError, match=r"the file's 10 nm taken in metres \(L\* = 1 m in paper units\)"):
+    with pytest.raises(ParameterError, match=r"the file's 10 nm converted to metres \(L\* = 1 m in paper units\)"):
         Params(f_th=0.0, shape="height_map", height_map=path, spacing=1 / 32, max_indent=0.01, step=1e-3)
     # the file's own value given again is accepted and gives the same heights
     p = Params(**SI_MAP, height_map=path, spacing=1e-8, map_pixel_size=1e-8, max_indent=1e-8, step=1e-9)

@@ -453,6 +453,13 @@ def check(p, memory: bool = True) -> list[str]:
         notes.append(f"{whose} rms slope is {slope:.3g}, steeper than {MAX_RMS_SLOPE:g} (45 degrees): the half-space "
                      "(Boussinesq) model assumes gentle slopes"
                      + (" -- are the heights and the pixel size in the same length unit?" if is_map else ""))
+    if p.shape == "paraboloid" and p.delta_max > p.radius:
+        # a sphere deeper than R is refused by its geometry; a paraboloid is not, and an SI
+        # run given the paper's max_indent 0.05 for R = 1 mm started a 50 R preload
+        notes.append(f"max_indent: {p.delta_max:g}{metres} is deeper than the paraboloid's radius {p.radius:g}{metres}: "
+                     f"its slope at the Hertz contact edge, sqrt(max_indent/R) = {math.sqrt(p.delta_max / p.radius):.3g}, "
+                     f"is steeper than {MAX_RMS_SLOPE:g} (45 degrees), where the half-space model assumes gentle "
+                     "slopes" + (" -- paper-unit values mixed into an SI run?" if metres else ""))
     # a flat punch is in full contact at any depth: its pull-off does not depend on the preload.
     # An explicit max_load is the user's preload, as an explicit max_indent is (not flagged:
     # at 1/32 a max_load of 0.004, depth 0.045 where the estimate asks 0.082, gave a jump-off

@@ -765,6 +765,12 @@ def _validate_protocol(p: Params) -> None:
         _integer("snapshots", snaps, 1)
     if p.control == "displacement":
         return                          # max_load and load_step: see APPLIES
+    if p.shape == "height_map":
+        # its peak load would be a Hertz load of a radius that does not apply, and an
+        # explicit max_load has no closed-form depth to size the run. First: the other
+        # messages ("leave max_indent 'auto'") led only to this one
+        raise ParameterError("control: 'force' is not available for shape='height_map'; use "
+                             "control='displacement' with max_indent")
     if p.max_load is not None:
         _positive("max_load", p.max_load)
         if p.max_indent != "auto":
@@ -773,11 +779,6 @@ def _validate_protocol(p: Params) -> None:
     elif p.shape == "flat_punch":
         raise ParameterError("max_load: control='force' on a flat punch needs an explicit max_load "
                              "(there is no Hertz load to derive it from)")
-    if p.shape == "height_map":
-        # its peak load would be a Hertz load of a radius that does not apply, and an
-        # explicit max_load has no closed-form depth to size the run
-        raise ParameterError("control: 'force' is not available for shape='height_map'; use "
-                             "control='displacement' with max_indent")
     if p.load_step is not None:
         _positive("load_step", p.load_step)
 
@@ -882,6 +883,10 @@ def _validate_surface(p: Params) -> None:
     # threshold disorder
     _choice("threshold_disorder", p.threshold_disorder, DISORDERS)
     w = _finite("disorder_width", p.disorder_width)
+    if p.threshold_disorder != "none" and w == 0.0:
+        # "must be in [0.015, 2] ... got 0.0" read as if a zero had been given
+        raise ParameterError(f"disorder_width: required with threshold_disorder={p.threshold_disorder!r}: the "
+                             "std/mean of the thresholds, e.g. 0.3")
     if p.threshold_disorder == "uniform" and not 0.0 < w <= MAX_UNIFORM_WIDTH:
         raise ParameterError(f"disorder_width: must be in (0, {MAX_UNIFORM_WIDTH:.4f}] for 'uniform' "
                              f"(std/mean; 1/sqrt(3) keeps F_th >= 0), got {w!r}")
@@ -945,7 +950,7 @@ def _check_map_covers(p: Params) -> None:
         need = layout_reach(p, hw)
         if hw <= 0 or need > avail * (1 + 1e-9):
             nx, ny = hm.heights.shape
-            own = (f", the file's {hm.pixel_size:g} {hm.unit or ''} taken in metres"
+            own = (f", the file's {hm.pixel_size:g} {hm.unit or ''} converted to metres"
                    + (" (L* = 1 m in paper units)" if p.units == "paper" else "")
                    if hm.pixel_size is not None and p.map_pixel_size is None else "")
             raise ParameterError(f"height_map: the map ({nx} x {ny} pixels of {map_pixel(p, hm):g}{own}) covers "
