@@ -654,7 +654,8 @@ def write_limit_report(out_dir: Path, points: pd.DataFrame, results: list[LimitR
         tab = points.sort_values(["geometry", "self_term", "ratio", "max_indent"])[
             ["geometry", "self_term", "spacing", "ratio", "max_indent", "F_max", "y", "step_bound", "wall_time", "warnings",
              "source"]]
-        tab = tab.assign(spacing=[fraction_text(s) for s in tab["spacing"]],
+        tab = tab.assign(self_term=[f"{s:g}" for s in tab["self_term"]],      # 2.9732, as the other tables
+                         spacing=[fraction_text(s) for s in tab["spacing"]],
                          step_bound=[f"{100 * b:.2f} %" for b in tab["step_bound"]])
         lines += [md_table(tab.rename(columns={"ratio": "a/Δ", "y": "y (coefficient)", "wall_time": "run s"})), ""]
     lines += ["## Reproduce", "", "```", "make limit JOBS=2      # tfm limit --jobs 2: runs, resumes, fits, writes this file",
