@@ -118,10 +118,6 @@ def kept_points(path: Path, specs: dict) -> pd.DataFrame:
     return read_kept(path, specs)[0]
 
 
-# a run's record, not the table, says what the run was (its id is the record's hash)
-FROM_THE_RUN = ("self_term", "spacing", "max_indent", "step")
-
-
 def read_kept(path: Path, specs: dict) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
     """(kept points of the campaigns' runs, rows of ``path`` that match no run now, notes).
 
@@ -168,6 +164,7 @@ def read_kept(path: Path, specs: dict) -> tuple[pd.DataFrame, pd.DataFrame, list
     for row in kept.to_dict("records"):
         if row["run_id"] in runs and runs[row["run_id"]][0] == row["geometry"]:
             p = runs[row["run_id"]][1].params
+            # the run's record, not the table, says what the run was (the id is its hash)
             truth = dict(self_term=p.self_term, spacing=p.spacing, max_indent=p.delta_max, step=p.step)
             for key, value in truth.items():
                 given = pd.to_numeric(pd.Series([row[key]]), errors="coerce").iloc[0]
