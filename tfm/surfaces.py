@@ -154,7 +154,7 @@ def spectral_rms_slope(h: np.ndarray, spacing: float) -> float:
     q = wavevectors(n, spacing)
     dev = h - h.mean()
     # in units of the largest deviation: rms_height 1e300 overflowed the squares to NaN,
-    # which passed the steep-surface check (inf, which it flags, is what such heights give)
+    # which passed the steep-surface check (only the guards read this slope)
     scale = float(np.abs(dev).max()) if dev.size else 0.0
     if not 0.0 < scale < math.inf:
         return 0.0 if scale == 0.0 else math.inf
