@@ -701,15 +701,6 @@ def _strict(value):
     return value if math.isfinite(value) else None
 
 
-def _selected(spec, where) -> list:
-    from ..campaign import CampaignError, select_runs
-
-    try:
-        return list(select_runs(spec, where))
-    except CampaignError:
-        return []
-
-
 def select_limit_runs(specs: dict, max_ratio: float | None, where) -> dict | None:
     """Run ids to compute now per geometry: a_c/Δ <= max_ratio and every KEY=VALUE of
     ``where`` (tfm.campaign.select_runs); None for all. A ``where`` that matches no run in
@@ -718,7 +709,7 @@ def select_limit_runs(specs: dict, max_ratio: float | None, where) -> dict | Non
 
     if max_ratio is None and not where:
         return None
-    only, errors = {}, []
+    only, errors, matching = {}, [], []
     for geometry, spec in specs.items():
         runs = spec.runs
         if where:
@@ -727,14 +718,13 @@ def select_limit_runs(specs: dict, max_ratio: float | None, where) -> dict | Non
             except CampaignError as exc:
                 errors.append(exc)
                 runs = ()
+        matching += runs
         only[geometry] = {r.run_id for r in runs if max_ratio is None or within_ratio(r.params, max_ratio)}
     if len(errors) == len(specs):         # each campaign's reason (the first alone hid the others)
         raise CampaignError("; ".join(str(e) for e in errors)) if len(errors) > 1 else errors[0]
     if max_ratio is not None and not any(only.values()):
         # it said "nothing to run, 0 of 60 runs already done" and exited 0
-        matching = [r for g, spec in specs.items() for r in
-                    (spec.runs if not where else _selected(spec, where))]
-        smallest = min(spec_ratio(r.params) for r in matching)
+        smallest = min(spec_ratio(r.params) for r in matching)      # of the runs --where keeps
         raise CampaignError(f"--max-ratio: no run{' that matches --where' if where else ''} has "
                             f"a_c/Δ <= {max_ratio:g}; the smallest is {smallest:.3g}")
     return only
