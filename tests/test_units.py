@@ -169,6 +169,31 @@ def test_si_max_load_is_quoted_in_newtons():
     assert p.delta_max == to_paper(p).delta_max
 
 
+def test_si_step_against_the_automatic_preload_is_quoted_in_metres():
+    """Under max_indent='auto' the paper-units twin checked the step itself: its messages
+    lost the metres and the "paper-unit values mixed in?" hint, and named max_indent,
+    which the user had not given (a hunt)."""
+    base = dict(SI, spacing=R / 64, shape="paraboloid")
+    # a paper-unit step (1 for 1 m) meets the 0.5 R cap of the automatic preload
+    with pytest.raises(ParameterError, match=r"^step: must be <= the automatic preload depth \(0\.0005 m, capped "
+                                             r"at 0\.5 R; max_indent='auto'\), got 1\.0; with units='si' every "
+                                             r"length is in metres \(paper-unit values mixed in\?\)"):
+        Params.from_dict(dict(base, step=1.0))
+    with pytest.raises(ParameterError, match=r"^step: the automatic preload depth \(\S+ m; max_indent='auto'\) / "
+                                             r"step = \S+ steps; must be <= 1e\+06"):
+        Params.from_dict(dict(base, step=1e-15))
+    p = Params.from_dict(dict(base, step=R * 1e-4))
+    depth = to_paper(p).delta_max
+    with pytest.raises(ParameterError, match=rf"loading steps to the automatic preload depth {depth:.3g} m \(step "
+                                             rf"{2 * depth:.3g} m\); .* Use step <= {depth / 10:.3g} m, or give "
+                                             r"max_indent"):
+        check(Params.from_dict(dict(base, step=2 * depth, allow="")), memory=False)
+    # the depth itself is the twin's, whatever step the twin was checked with
+    for step in (R * 1e-4, depth / 3, depth / 20):
+        q = Params.from_dict(dict(base, step=step))
+        assert q.delta_max == to_paper(q).delta_max
+
+
 def test_units_parameters_sweep_in_a_campaign():
     base = {k: v for k, v in SI.items() if k != "work_of_adhesion"}
     spec = spec_from_dict({"name": "u", "base": dict(base, spacing=R / 64, step=R * 1e-3, shape="paraboloid",

@@ -419,10 +419,10 @@ def check(p, memory: bool = True) -> list[str]:
         # under force control max_indent follows max_load: name what the user gave
         where = ("the automatic preload depth" if auto else f"the depth of max_load {given_load:g}{newtons}:"
                  if p.control == "force" and p.max_load is not None else "max_indent")
-        _guard(notes, allowed, "step", f"step: only {_below(steps, MIN_LOADING_STEPS)} loading steps to {where} {depth:.3g} "
-                        f"(step {p.step:.3g}); "
+        _guard(notes, allowed, "step", f"step: only {_below(steps, MIN_LOADING_STEPS)} loading steps to {where} "
+                        f"{depth:.3g}{metres} (step {p.step:.3g}{metres}); "
                         f"below {MIN_LOADING_STEPS} the step shifts the pull-off by up to 16 %. Use step <= "
-                        f"{depth / MIN_LOADING_STEPS:.3g}" + (", or give max_indent" if auto else ""))
+                        f"{depth / MIN_LOADING_STEPS:.3g}{metres}" + (", or give max_indent" if auto else ""))
     if p.tol > MAX_TOL:
         _guard(notes, allowed, "tol", f"tol: {p.tol:g} is looser than {MAX_TOL:g}; snap and entry decisions then "
                        "follow the solver error and can move the pull-off by a whole step (tol 1e-4: +0.94 % at "

@@ -220,10 +220,13 @@ class Params:
             load = self.max_load / force_scale(self) if self.units == "si" else self.max_load
             return float(preload_indent(self.shape, load, self.radius))
         if self.max_indent == "auto" and self.units == "si":
+            from .theory import AUTO_PRELOAD_CAP, auto_max_indent
             from .units import to_paper     # same lengths in paper units with L* = 1 m
-            # no load_step or max_load: the preload does not depend on them here, and the
-            # twin would check them in paper units (this record checks them in newtons)
-            return to_paper(self, load_step=None, max_load=None).delta_max
+            # The twin carries no load_step or max_load (the preload does not depend on
+            # them here) and a step that passes its checks: this record checks its own
+            # loads and step, in newtons and metres, and the step only floors the depth.
+            twin = to_paper(self, load_step=None, max_load=None, step=AUTO_PRELOAD_CAP * self.radius / 10)
+            return auto_max_indent(twin, step=self.step)
         if self.max_indent == "auto":
             from .theory import auto_max_indent
             return auto_max_indent(self)
@@ -935,6 +938,10 @@ def _depth_text(p: Params, dmax: float) -> str:
     length, force = unit_suffixes(p)
     if p.control == "force" and p.max_load is not None:
         return f"the depth of max_load {p.max_load:g}{force} ({dmax:.3g}{length})"
+    if p.max_indent == "auto":
+        from .theory import AUTO_PRELOAD_CAP
+        cap = f", capped at {AUTO_PRELOAD_CAP:g} R" if dmax >= AUTO_PRELOAD_CAP * p.radius * (1 - 1e-12) else ""
+        return f"the automatic preload depth ({dmax:.3g}{length}{cap}; max_indent='auto')"
     return f"max_indent ({dmax:g}{length})"
 
 

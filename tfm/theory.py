@@ -103,11 +103,12 @@ def neighbors_foundation_compliance(rings: int, self_term: float, spacing: float
     return spacing * (self_term + float((1.0 / r[mask]).sum()))
 
 
-def auto_max_indent_uncapped(p, step_floor: bool = True) -> float:
-    """``auto_preload_depth``, never shallower than 10 loading steps (without ``step_floor``:
-    the depth the physics asks for, against which tfm.guards measures the step)."""
+def auto_max_indent_uncapped(p, step_floor: bool = True, step: float | None = None) -> float:
+    """``auto_preload_depth``, never shallower than 10 loading steps of ``step`` (default
+    ``p.step``; without ``step_floor``: the depth the physics asks for, against which
+    tfm.guards measures the step)."""
     depth = auto_preload_depth(p)
-    return max(depth, 10.0 * p.step) if step_floor else depth
+    return max(depth, 10.0 * (p.step if step is None else step)) if step_floor else depth
 
 
 def auto_preload_depth(p) -> float:
@@ -144,9 +145,9 @@ def run_critical_radius(p) -> float:
 AUTO_PRELOAD_CAP = 0.5      # times R: never as deep as the sphere itself
 
 
-def auto_max_indent(p, step_floor: bool = True) -> float:
+def auto_max_indent(p, step_floor: bool = True, step: float | None = None) -> float:
     """``auto_max_indent_uncapped``, capped at 0.5 R (tfm.guards states the cap)."""
-    return min(auto_max_indent_uncapped(p, step_floor), AUTO_PRELOAD_CAP * p.radius)
+    return min(auto_max_indent_uncapped(p, step_floor, step), AUTO_PRELOAD_CAP * p.radius)
 
 
 def jkr_curve(k_ic, radius, a):
