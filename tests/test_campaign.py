@@ -7,10 +7,12 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -987,6 +989,31 @@ def test_where_computes_only_the_selected_runs_and_resumes_the_rest(tmp_path, ca
                            ("alpha", "expected KEY=VALUE")):
         assert tfm_main(args + ["--where", where]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_where_lists_the_values_a_user_can_type_back(tmp_path):
+    """--where's refusal listed the first twelve values in text order and at 6 digits: of
+    20 spacings the ones nearest the value asked for were hidden, and 0.0294118 (1/34),
+    typed back, matched nothing."""
+    from tfm.campaign import CampaignError, select_runs
+
+    spacings = ", ".join(f'"1/{n}"' for n in range(16, 36))
+    path = _write(tmp_path, 'name = "many"\n[base]\nk_th = 0.02\nshape = "paraboloid"\nmax_indent = 0.025\n'
+                            f'allow = "coarse"\n[sweep]\nspacing = [{spacings}]\nalpha = [0.5, 0.75, 1.0]\n')
+    spec = load_spec(path)
+    with pytest.raises(CampaignError) as err:
+        select_runs(spec, "spacing=0.0295")
+    near = re.search(r"the 12 nearest to 0\.0295: (.*)$", str(err.value)).group(1).split(", ")
+    assert "20 values" in str(err.value) and len(near) == 12
+    nearest = sorted(sorted(range(16, 36), key=lambda n: abs(1 / n - 0.0295))[:12], reverse=True)
+    # in numeric order, 1/35 .. 1/24, each as 1/N or its exact decimal (1/32 = 0.03125)
+    assert [Fraction(v) for v in near] == [Fraction(1, n) for n in nearest]
+    assert "1/35" in near and "0.03125" in near
+    # each listed value, typed back, selects its runs
+    for value in near:
+        assert len(select_runs(spec, f"spacing={value}")) == 3
+    with pytest.raises(CampaignError, match=r"its values of alpha: 0\.5, 0\.75, 1\.0$"):
+        select_runs(spec, "alpha=2")
 
 
 def test_run_campaign_takes_the_runs_select_runs_returns(tmp_path):

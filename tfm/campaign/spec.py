@@ -345,6 +345,37 @@ def _label(swept: Mapping[str, Any]) -> str:
     return "(" + ", ".join(f"{k}={v!r}" for k, v in swept.items()) + ")" if swept else ""
 
 
+WHERE_VALUES_SHOWN = 12
+
+
+def _where_value(h) -> str:
+    """A value as --where takes it back: every digit that the 1e-12 match needs, or 1/N
+    for a long decimal that is the reciprocal of a whole number (as campaign files give
+    spacings)."""
+    if isinstance(h, float) and not isinstance(h, bool):
+        if len(repr(h)) > 8 and 0 < h < 1 and abs(1 / h - round(1 / h)) <= 1e-12 * (1 / h):
+            return f"1/{round(1 / h)}"
+        return repr(h)
+    return str(h)
+
+
+def _values_text(have: set, value) -> str:
+    """A campaign's values of one parameter, numbers in numeric order; beyond
+    WHERE_VALUES_SHOWN of them, those nearest to the value asked for (the first twelve in
+    text order had hidden them)."""
+    numbers = sorted(h for h in have if isinstance(h, (int, float)) and not isinstance(h, bool))
+    others = sorted((h for h in have if h not in numbers), key=str)
+    ordered = numbers + others
+    if len(ordered) <= WHERE_VALUES_SHOWN:
+        return ", ".join(_where_value(h) for h in ordered)
+    if numbers and isinstance(value, (int, float)) and not isinstance(value, bool):
+        near = sorted(sorted(numbers, key=lambda h: abs(h - value))[:WHERE_VALUES_SHOWN])
+        return (f"{len(ordered)} values, the {len(near)} nearest to {_where_value(value)}: "
+                + ", ".join(_where_value(h) for h in near))
+    return (f"{len(ordered)} values, the first {WHERE_VALUES_SHOWN}: "
+            + ", ".join(_where_value(h) for h in ordered[:WHERE_VALUES_SHOWN]) + ", ...")
+
+
 def select_runs(spec: CampaignSpec, where) -> list[Run]:
     """The runs of ``spec`` whose parameters match every ``KEY=VALUE`` of ``where`` (values
     read as in a campaign file: "spacing=1/1340", "self_term=3.8"; numbers compared to 1e-12
@@ -368,11 +399,10 @@ def select_runs(spec: CampaignSpec, where) -> list[Run]:
     chosen = [r for r in spec.runs if all(same(getattr(r.params, k), v) for k, _, v in conditions)]
     if not chosen:
         for key, raw, value in conditions:
-            have = sorted({getattr(r.params, key) for r in spec.runs}, key=str)
+            have = {getattr(r.params, key) for r in spec.runs}
             if not any(same(h, value) for h in have):
-                shown = ", ".join(f"{h:g}" if isinstance(h, float) else str(h) for h in have[:12])
                 raise CampaignError(f"--where: no run of campaign {spec.name!r} has {key}={raw}; "
-                                    f"its values of {key}: {shown}{', ...' if len(have) > 12 else ''}")
+                                    f"its values of {key}: {_values_text(have, value)}")
         raise CampaignError(f"--where: no run of campaign {spec.name!r} matches all of "
                             f"{', '.join(f'{k}={r}' for k, r, _ in conditions)}")
     return chosen
