@@ -434,6 +434,11 @@ def test_a_long_direct_run_is_announced_with_an_estimate(tmp_path, monkeypatch, 
     # springs) was put at an hour and took 67 s on one thread
     wide = guards.direct_cost_estimate(Params.from_dict(dict(std, spacing="1/128", extent=1.0)))
     assert 60 < wide < guards.COST_NOTE_SECONDS
+    # under force control it grows with the load levels: at 1/48 a load_step 50x finer
+    # (100 -> 5000 levels) took 15.6x the solves and 9x the time; the estimate stayed put
+    fc = dict(std, spacing="1/48", max_indent="auto", control="force", max_load=0.005)
+    coarse, fine = (guards.direct_cost_estimate(Params.from_dict(dict(fc, load_step=ls))) for ls in (None, 1e-6))
+    assert 5 < fine / coarse < 50
     # a run of years is refused, with its override (a 1/2048 run started and could not be stopped)
     huge = dict(std, spacing="1/2048", max_indent=0.5, step=1e-2)
     with pytest.raises(guards.GuardError, match=r"operator: the direct sum over .* springs would take roughly "
