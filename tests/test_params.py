@@ -227,6 +227,20 @@ def test_values_that_change_nothing_without_adhesion_are_warned_about(kw, names)
         assert f"{name}: given but has no effect here: every threshold is zero (no adhesion)" in said
 
 
+def test_a_seed_without_jitter_is_warned_about():
+    """layout='jittered' with jitter 0 is the square grid: a seed gave another run id and
+    the same curve, without a word (a hunt). Warned, not refused: a campaign may sweep the
+    jitter through 0 with its seeds."""
+    kw = dict(spacing="1/32", k_th=0.02, shape="paraboloid", max_indent=0.05, step=1e-3, layout="jittered",
+              operator="direct", jitter=0.0)
+    with pytest.warns(ParameterWarning, match=r"seed: given but has no effect here: jitter is 0"):
+        Params.from_dict(dict(kw, seed=5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")          # the default seed, or a jitter: nothing to say
+        Params.from_dict(kw)
+        Params.from_dict(dict(kw, jitter=0.1, seed=5))
+
+
 def test_a_threshold_override_clears_the_other_one_for_a_dict_as_for_a_record():
     """simulate(dict with k_th, f_th=...) was refused with "give only one", while the
     same call with a Params record replaced k_th (a user's hunt)."""

@@ -498,16 +498,20 @@ APPLIES: dict[str, Applies] = {
 
 def _moot(p: Params) -> list[tuple[str, str]]:
     """Parameters that apply but whose values change nothing in this run: with every
-    threshold zero, the exponent and the disorder around it. Warned about (from_dict), not
-    refused: a campaign may sweep k_th through 0 with the rest fixed."""
+    threshold zero, the exponent and the disorder around it; with jitter 0, the seed of the
+    jitter. Warned about (from_dict), not refused: a campaign may sweep k_th or jitter
+    through 0 with the rest fixed."""
+    moot = []
+    if p.layout == "jittered" and p.jitter == 0:
+        moot.append(("seed", "jitter is 0, so the jittered layout is the square grid whatever the seed"))
     zero = p.f_th == 0 or (p.f_th is None and p.k_th == 0) or (p.units == "si" and p.work_of_adhesion == 0)
-    if not zero:
-        return []
-    why = "every threshold is zero (no adhesion)"
-    # with an explicit f_th, alpha already applies only as 0 (APPLIES)
-    names = (["alpha"] if p.f_th is None else []) + (["threshold_disorder", "disorder_width", "disorder_seed"]
-                                                      if p.threshold_disorder != "none" else [])
-    return [(name, why) for name in names]
+    if zero:
+        why = "every threshold is zero (no adhesion)"
+        # with an explicit f_th, alpha already applies only as 0 (APPLIES)
+        names = (["alpha"] if p.f_th is None else []) + (["threshold_disorder", "disorder_width", "disorder_seed"]
+                                                          if p.threshold_disorder != "none" else [])
+        moot += [(name, why) for name in names]
+    return moot
 
 
 def _check_applies(p: Params) -> None:
