@@ -164,6 +164,18 @@ def test_a_capped_automatic_preload_is_stated_before_the_run(kw):
     assert "loading steps" in notes[0]
 
 
+@pytest.mark.parametrize("kw, basis", [(dict(kernel="local", c_w=50.0), "the Winkler estimate"),
+                                       (dict(kernel="neighbors", neighbor_rings=2, c_w=1.0, f_th=2e-3),
+                                        "the estimate of the neighbour rings")])
+def test_a_capped_preload_names_the_estimate_of_its_kernel(kw, basis):
+    # the note said "the JKR estimate asks for" for the Winkler kernels, whose automatic
+    # preload is twice a snap depth (docs/physics.md), not JKR's
+    p = Params(spacing=1 / 32, step=1e-3, **{k: v for k, v in kw.items() if k != "c_w" or v != 1.0})
+    notes = guards.check(p.replace(allow="coarse"))
+    assert any(n.startswith("max_indent: auto preload capped at 0.5 R") and f"({basis}" in n
+               and "JKR" not in n for n in notes), notes
+
+
 def test_an_uncapped_automatic_preload_says_nothing():
     assert guards.check(Params()) == []
 

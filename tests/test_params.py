@@ -30,6 +30,8 @@ from tfm.params import ParameterWarning, parse_number
     (dict(tol=0.5), r"tol: must be in \[1e-15, 1e-2\], got 0.5"),
     # CG's recursive residual fell on below rounding, and at 1e-200 divided by zero mid-run
     (dict(tol=1e-200), r"tol: must be in \[1e-15, 1e-2\], got 1e-200"),
+    # at 1e300 a NumPy overflow in the solver was the only message, then a pull-off of 2e-299
+    (dict(self_term=1e300), r"self_term: must be > 0 and <= 1e\+06, got 1e\+300"),
     (dict(neighbor_rings=0), r"neighbor_rings: must be in \[1, 64\]"),
     (dict(neighbor_rings=1.5), "neighbor_rings: expected an integer"),
     (dict(layout="hexagonal"), "operator: 'fft' needs a regular square grid"),

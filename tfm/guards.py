@@ -473,11 +473,11 @@ def check(p, memory: bool = True) -> list[str]:
     explicit_load = p.control == "force" and p.max_load is not None
     if p.max_indent == "auto" and p.shape != "flat_punch" and not explicit_load:
         from .protocol import n_loading_steps
-        from .theory import auto_max_indent_uncapped
+        from .theory import auto_max_indent_uncapped, auto_preload_basis
 
         wanted = auto_max_indent_uncapped(p)
         if wanted > p.delta_max * (1 + 1e-12):
-            notes.append(f"max_indent: auto preload capped at 0.5 R = {p.delta_max:.4g} (the JKR estimate "
-                         f"asks for {wanted:.4g}); the "
+            notes.append(f"max_indent: auto preload capped at 0.5 R = {p.delta_max:.4g}{metres} "
+                         f"({auto_preload_basis(p)} asks for {wanted:.4g}{metres}); the "
                          f"preload may be too shallow for the pull-off; {n_loading_steps(p)} loading steps")
     return notes

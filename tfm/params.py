@@ -561,8 +561,8 @@ def _coerce(key: str, value: Any, prefix: str) -> Any:
             try:
                 return parse_number(value, key)
             except ParameterError:
-                raise ParameterError(f"max_indent: cannot read {value!r}: give 'auto' (the preload the "
-                                     "JKR estimate asks for) or a depth such as 0.05 or 1/20") from None
+                raise ParameterError(f"max_indent: cannot read {value!r}: give 'auto' (a preload deep enough "
+                                     "for the pull-off) or a depth such as 0.05 or 1/20") from None
         if key == "k_th_coefficient":
             from .units import K_TH_COEFFICIENTS
             names = tuple(K_TH_COEFFICIENTS) + ("limit",)
@@ -628,6 +628,10 @@ LOOSE_THETA = 0.7
 #: residual lies much below 10x that (the solves reach 1e-15 at 1/32 and 1/128)
 MIN_TOL = 1e-15
 
+#: largest self_term: beyond it every coupling 1/r is under 1e-6 of C_ii, a Winkler
+#: foundation (kernel='local'); at 1e300 the solver's squares overflowed mid-run
+MAX_SELF_TERM = 1e6
+
 #: most loading steps of a run (max_indent / step, or force control's peak load / load_step)
 MAX_STEPS = 1e6
 
@@ -671,7 +675,7 @@ def _validate(p: Params) -> None:
     _positive("radius", p.radius)
     _choice("shape", p.shape, SHAPES)
     _choice("kernel", p.kernel, KERNELS)
-    _positive("self_term", p.self_term)
+    _positive("self_term", p.self_term, upper=MAX_SELF_TERM)
     _integer("neighbor_rings", p.neighbor_rings, 1, 64)
     _positive("c_w", p.c_w)
     _choice("operator", p.operator, OPERATORS)

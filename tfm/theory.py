@@ -129,6 +129,15 @@ def auto_preload_depth(p) -> float:
     return delta
 
 
+def auto_preload_basis(p) -> str:
+    """What ``auto_preload_depth`` estimates from, as messages name it."""
+    if p.kernel == "local":
+        return "the Winkler estimate (twice the depth c_w sigma_th at which springs snap)"
+    if p.kernel == "neighbors":
+        return "the estimate of the neighbour rings as a Winkler foundation"
+    return "the JKR estimate"
+
+
 def threshold_stress(p) -> float:
     """sigma_th = F_th / A, A the layout's spring area (tfm.threshold, the threshold's home)."""
     from .threshold import nominal_area
