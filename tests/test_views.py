@@ -320,7 +320,17 @@ def test_animate_makes_a_gif_with_one_frame_per_unloading_snapshot(stored_run, t
     phase = dict(zip(curve["step"], curve["phase"]))
     steps = Fields(stored_run.with_name("curve.fields.nc")).steps
     expected = sum(phase[s] == "unload" for s in steps) + 1          # + the last loading step
-    assert Image.open(out).n_frames == expected
+    gif = Image.open(out)
+    assert gif.n_frames == expected
+    # one palette for every frame: a force has one colour throughout (each frame had its
+    # own, and the colour bar's colours moved by up to 82/255 from frame to frame)
+    rgb = []
+    for i in range(gif.n_frames):
+        gif.seek(i)
+        rgb.append(np.asarray(gif.convert("RGB")))
+    # so the whole animation uses at most one palette's 256 colours
+    used = set().union(*(map(tuple, frame.reshape(-1, 3)) for frame in rgb))
+    assert len(rgb) > 1 and len(used) <= 256, len(used)
 
 
 def test_a_failed_animation_leaves_the_earlier_one_whole(stored_run, tmp_path, monkeypatch, capsys):

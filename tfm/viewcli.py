@@ -411,7 +411,7 @@ def _write_animation(fields, curve, params, out, fps, steps, dpi) -> None:
                 canvas.restore_region(background)
                 for artist in moving:
                     fig.draw_artist(artist)
-                frames.append(_to_palette(canvas))
+                frames.append(_to_palette(canvas, frames[0] if frames else None))
             if writer is not None:
                 writer.finish()
         except (BrokenPipeError, subprocess.CalledProcessError) as exc:
@@ -446,12 +446,17 @@ def _ffmpeg_error(writer, exc) -> str:
     return lines[-1] if lines else type(exc).__name__
 
 
-def _to_palette(canvas):
-    """The drawn frame as a palette image (1 byte per pixel: frames stay small in memory)."""
+def _to_palette(canvas, first=None):
+    """The drawn frame as a palette image (1 byte per pixel: frames stay small in memory),
+    in the palette of the ``first`` frame when given: one palette for the whole animation,
+    so a force has one colour in every frame (a palette per frame moved the colour bar's
+    colours by up to 82/255 between frames). The first frame holds the whole colour bar."""
     from PIL import Image
 
-    img = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
-    return img.convert("RGB").quantize(colors=128, method=Image.Quantize.MEDIANCUT)
+    img = Image.frombuffer("RGBA", canvas.get_width_height(), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
+    if first is None:
+        return img.quantize(colors=255, method=Image.Quantize.MEDIANCUT)
+    return img.quantize(palette=first, dither=Image.Dither.NONE)
 
 
 def _mp4_writer(fig, out, fps, dpi):
