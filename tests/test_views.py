@@ -653,17 +653,19 @@ def test_show_and_animate_of_an_si_run_name_the_units_like_tfm_plot(si_run, monk
     assert_units(figures[0][0])
 
 
-def test_paper_unit_contact_maps_keep_their_labels(stored_run):
+def test_paper_unit_contact_maps_name_the_paper_units(stored_run):
+    """A paper-units run's axes had no unit at all, where an SI run's say m and N and the
+    snapshot file says L* and F* (a hunt)."""
     from tfm.viewcli import _need_fields, load_run
 
     curve, params, fpath = load_run(stored_run)
     fields = _need_fields(stored_run, fpath, params)
     fig = plots.plot_contact_map(fields, fields.snapshot(fields.event_step("pull_off")), curve, params)
     ax_map, ax_curve, cbar = fig.axes[:3]
-    assert (ax_map.get_xlabel(), ax_map.get_ylabel()) == ("$x$", "$y$")
-    assert cbar.get_ylabel() == "spring force $F$ (tension > 0)"
+    assert (ax_map.get_xlabel(), ax_map.get_ylabel()) == ("$x$ in $L^*$", "$y$ in $L^*$")
+    assert cbar.get_ylabel() == "spring force $F$ in $F^*$ (tension > 0)"
     assert (_no_offset(ax_curve.get_xlabel()), _no_offset(ax_curve.get_ylabel())) == \
-        ("indentation $\\delta = -d$", "force $P$ (compression > 0)")
+        ("indentation $\\delta = -d$ in $L^*$", "force $P$ in $F^*$ (compression > 0)")
     assert " m," not in fig._suptitle.get_text() and " N," not in fig._suptitle.get_text()
 
 
