@@ -293,6 +293,16 @@ def test_a_run_without_a_pull_off_says_why_and_which_events_it_has(tmp_path, cap
     err = capsys.readouterr().err
     assert "no pull_off snapshot: the run never pulled" in err and "stored events: max_load (step " in err
     assert main(["show", str(out), "--step", " MAX_LOAD "]) == 0
+    # an adhesive run that max_unload_steps stopped before any tension was blamed on "no
+    # adhesion" (a hunt)
+    cut = tmp_path / "cut.parquet"
+    assert main(["run", "--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.05",
+                 "--step", "1e-3", "--snapshots", "events", "--max-unload-steps", "20", "-q", "--no-plot",
+                 "-o", str(cut)]) == 3
+    capsys.readouterr()
+    assert main(["show", str(cut)]) == 2
+    err = capsys.readouterr().err
+    assert "no pull_off snapshot: unloading stopped at max_unload_steps" in err and "no adhesion" not in err
 
 
 @pytest.mark.parametrize("view", [["plot"], ["show", "--step", "pull_off"]])

@@ -252,9 +252,11 @@ class SnapshotWriter:
             free = shutil.disk_usage(self._tmp.parent).free
             need = 2 * self._snapshot_bytes + DISK_RESERVE
             if free < need:
-                self.stopped = (f"field snapshots stopped at step {step}: {free / 2**20:.1f} MiB free on "
-                                f"{self._tmp.parent}, under the {need / 2**20:.1f} MiB kept for the next snapshot "
-                                "and the table; the file holds the steps before")
+                # enough decimals that the two differ (both read 64.6 MiB in a hunt)
+                digits = next((d for d in range(1, 7) if f"{free / 2**20:.{d}f}" != f"{need / 2**20:.{d}f}"), 6)
+                self.stopped = (f"field snapshots stopped at step {step}: {free / 2**20:.{digits}f} MiB free on "
+                                f"{self._tmp.parent}, under the {need / 2**20:.{digits}f} MiB kept for the next "
+                                "snapshot and the table; the file holds the steps before")
         return self.stopped is None
 
     def _write(self, rec: dict, F, u, state, label: str) -> None:

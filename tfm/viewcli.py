@@ -193,13 +193,40 @@ EVENT_ABSENT = {"pull_off": "the run never pulled (no step under tension: no adh
                 "max_load": "no step was recorded"}
 
 
+def snapshots_cut_short(fields, unloading: bool = True) -> str | None:
+    """Why the run's snapshots end early, from the summary stored in the file: the disk
+    guard stopped them (tfm.snapshots), or (``unloading``) max_unload_steps stopped the
+    unloading."""
+    import json
+
+    try:
+        summary = json.loads(fields.attrs.get("summary") or "{}")
+    except (TypeError, ValueError):
+        return None
+    stopped = next((w.split(":")[0] for w in str(summary.get("warnings") or "").split("; ")
+                    if w.startswith("field snapshots stopped at step")), None)
+    if stopped:
+        return f"{stopped} (too little disk space), so the later steps have none"
+    if unloading and summary.get("unload_complete") is False:
+        return ("unloading stopped at max_unload_steps with springs still in contact, before the events "
+                "after it (raise max_unload_steps)")
+    return None
+
+
+def _event_absent(fields, event: str) -> str:
+    """Why a run has no snapshot of ``event``: the snapshots or the unloading were cut
+    short (show blamed "no adhesion" on a run that max_unload_steps stopped), else the
+    event's own reason."""
+    return snapshots_cut_short(fields, unloading=event != "max_load") or EVENT_ABSENT[event]
+
+
 def pick_step(fields, step: str) -> int:
     if step.strip().lower() in EVENT_NAMES:      # read like every other named value
         step = step.strip().lower()
         k = fields.event_step(step)
         if k is None:
             stored = [f"{e} (step {fields.event_step(e)})" for e in EVENT_NAMES if fields.event_step(e) is not None]
-            raise ViewError(f"{fields.path}: no {step} snapshot: {EVENT_ABSENT[step]}; "
+            raise ViewError(f"{fields.path}: no {step} snapshot: {_event_absent(fields, step)}; "
                             + (f"stored events: {', '.join(stored)}; pick one with --step"
                                if stored else "no event snapshot stored"))
         return k
@@ -349,6 +376,12 @@ def animate(fields, curve, params, out, fps: float = DEFAULT_FPS, unload_only: b
     steps = frame_steps(fields, curve, unload_only)
     if not steps:
         raise ViewError(f"{fields.path}: no snapshots to animate")
+    if unload_only and len(steps) == 1:
+        # the snapshots (or the run) stopped before unloading: a GIF of one loading frame
+        # was written without a word
+        why = snapshots_cut_short(fields) or "the run stored none while unloading"
+        raise ViewError(f"{fields.path}: no unloading snapshot to animate: {why}; --all-phases animates "
+                        "the loading snapshots")
     from .results import through_temporary
 
     # through a temporary file beside it: a failed write leaves an earlier animation whole
