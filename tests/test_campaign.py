@@ -1451,6 +1451,35 @@ def test_a_damaged_run_file_is_reported_then_computed_again(tmp_path, capsys):
     assert_bitwise_equal(pd.read_parquet(store.run_path(rid)), curve)
 
 
+def test_a_run_whose_snapshots_are_gone_or_damaged_is_computed_again(tmp_path, capsys):
+    """A run stored with field snapshots counted as done when its snapshots file was
+    deleted or truncated: status said "done", run "nothing to run", and only tfm show
+    noticed (a hunt)."""
+    from tfm.snapshots import Fields
+
+    spec = spec_from_dict({"name": "snaps", "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
+                                                     "max_indent": 0.05, "step": 5e-3, "snapshots": "events"},
+                           "sweep": {"alpha": [0.25, 0.5, 0.75]}}, source="snaps")
+    toml = _toml_of(spec, tmp_path)
+    run_campaign(spec, quiet=True, results_dir=tmp_path)
+    store = CampaignStore.for_spec(spec, tmp_path)
+    cut, gone, kept = spec.run_ids
+    steps = Fields(store.fields_path(cut)).steps.tolist()
+    data = store.fields_path(cut).read_bytes()
+    store.fields_path(cut).write_bytes(data[:2000])
+    store.fields_path(gone).unlink()
+    capsys.readouterr()
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "1 done" in out and "2 pending" in out, out
+    assert (f"2 stored runs in {store.runs_dir} lack the field snapshots they stored (e.g. {cut}.fields.nc: "
+            "unreadable (damaged or cut short?)): those runs are pending and computed again with them") in out
+    run_campaign(spec, quiet=True, results_dir=tmp_path)
+    assert "warning: campaign snaps: 2 stored runs" in capsys.readouterr().err
+    assert store.status(spec).done == spec.run_ids
+    assert Fields(store.fields_path(cut)).steps.tolist() == steps and store.fields_path(gone).exists()
+
+
 def test_status_of_a_limit_campaign_counts_its_kept_points(tmp_path, monkeypatch, capsys):
     """status said "60 pending" for limit_sphere, whose 60 runs all have a kept point in
     results/limit/points.csv (the runs are too large to keep): a user would have computed

@@ -57,13 +57,26 @@ class Status:
     # stored runs and failures of run ids the file no longer expands to (values removed
     # from it): kept on disk, left out of the tables
     extra: list[str] = dataclasses.field(default_factory=list)
-    # pending runs whose run file exists but cannot be read, or names another run: they
-    # are computed again and the new file replaces the damaged one
+    # pending runs whose run file exists but cannot be read, or names another run, or
+    # whose field snapshots are gone or cannot be read: they are computed again and the
+    # new files replace the damaged ones
     damaged: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def total(self) -> int:
         return len(self.done) + len(self.failed) + len(self.pending)
+
+
+def _snapshots_readable(path: Path) -> bool:
+    """Whether a run's field snapshots file is there and opens as HDF5 (NetCDF4) with its
+    steps: a truncated file fails to open."""
+    try:
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            return "step" in f and "F" in f
+    except (OSError, ValueError):
+        return False
 
 
 def code_here() -> dict[str, Any]:
@@ -271,6 +284,12 @@ class CampaignStore:
         for run in spec.runs:
             rid = run.run_id
             meta = self.run_metadata(rid)
+            if meta is not None and meta.get("fields") and not _snapshots_readable(self.runs_dir / meta["fields"]):
+                # a run stored with snapshots counts as done only with them (a deleted or
+                # truncated file was "done" and only tfm show noticed)
+                pending.append(rid)
+                damaged.append(rid)
+                continue
             if meta is not None:
                 done.append(rid)
                 if meta.get("summary", {}).get("warnings"):
@@ -302,11 +321,24 @@ class CampaignStore:
         """What to say about run files that exist but cannot be read, if any."""
         if not status.damaged:
             return None
-        n, first = len(status.damaged), self.run_path(status.damaged[0])
-        return (f"{n} run file{'s' if n > 1 else ''} in {self.runs_dir} cannot be read as the run "
-                f"{'they are' if n > 1 else 'it is'} named after (damaged or cut short? e.g. {first.name}): "
-                f"{'those runs are' if n > 1 else 'that run is'} pending and computed again, the new file "
-                "replacing the damaged one")
+        metas = {rid: self.run_metadata(rid) for rid in status.damaged}
+        files = [rid for rid, meta in metas.items() if meta is None]
+        fields = [rid for rid, meta in metas.items() if meta is not None]   # the run file reads
+        said = []
+        if files:
+            n = len(files)
+            said.append(f"{n} run file{'s' if n > 1 else ''} in {self.runs_dir} cannot be read as the run "
+                        f"{'they are' if n > 1 else 'it is'} named after (damaged or cut short? e.g. "
+                        f"{self.run_path(files[0]).name}): {'those runs are' if n > 1 else 'that run is'} pending "
+                        "and computed again, the new file replacing the damaged one")
+        if fields:
+            n, name = len(fields), metas[fields[0]]["fields"]
+            state = "gone" if not (self.runs_dir / name).exists() else "unreadable (damaged or cut short?)"
+            said.append(f"{n} stored run{'s' if n > 1 else ''} in {self.runs_dir} lack{'' if n > 1 else 's'} "
+                        f"the field snapshots {'they' if n > 1 else 'it'} stored (e.g. {name}: {state}): "
+                        f"{'those runs are' if n > 1 else 'that run is'} pending and computed again with "
+                        "them")
+        return "; ".join(said)
 
     def extra_note(self, status: Status) -> str | None:
         """What to say about stored runs the campaign file no longer has, if any."""
