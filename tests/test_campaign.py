@@ -1057,6 +1057,16 @@ def test_a_kernel_that_is_not_positive_definite_is_refused_before_anything_runs(
         tfm.simulate(**{**base, "neighbor_rings": 1})
 
 
+def test_a_list_in_base_points_to_sweep_and_zip():
+    """[base] alpha = [0.5, 0.75] said "cannot read [0.5, 0.75] as a number", and a list of
+    shapes "unknown value": neither said where lists go (a hunt)."""
+    for key, value in (("alpha", [0.5, 0.75]), ("shape", ["sphere", "paraboloid"])):
+        base = {"spacing": "1/32", "k_th": 0.02, "shape": "paraboloid", "max_indent": 0.05, key: value}
+        with pytest.raises(CampaignError, match=rf"^bad\.toml: \[base\] {key} = .*: \[base\] holds one value per "
+                                                r"parameter; a list of values goes in \[sweep\] .* or \[\[zip\]\]"):
+            spec_from_dict({"name": "bad", "base": base}, source="bad.toml")
+
+
 def _tiny(name):
     return spec_from_dict({"name": name, "base": {"spacing": "1/16", "k_th": 0.02, "shape": "paraboloid",
                                                   "max_indent": 0.05, "step": 5e-3},

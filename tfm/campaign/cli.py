@@ -82,7 +82,9 @@ def checkpoint_flag(parser) -> None:
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--checkpoint-every", type=float, default=CHECKPOINT_EVERY, metavar="SECONDS",
                        help="save a running curve's state this often, in <results>/<name>/checkpoints/, "
-                            f"so that a killed run continues from there (default {CHECKPOINT_EVERY:g})")
+                            f"so that a killed run continues from there (default {CHECKPOINT_EVERY:g}; 0 "
+                            "saves after every step, which can make a run 20x slower; --no-checkpoints "
+                            "turns them off)")
     group.add_argument("--no-checkpoints", dest="checkpoint_every", action="store_const", const=None,
                        help="save no checkpoints (a killed run starts again from its first step; "
                             "one saved earlier is still continued from)")

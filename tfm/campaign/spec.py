@@ -168,6 +168,10 @@ def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>", max_runs:
     _no_top_level_keys(data.get("base"), "[base]", where)
     _no_top_level_keys(data.get("sweep"), "[sweep]", where)
     base = _table(data.get("base", {}), "[base]", where)
+    for key, value in base.items():
+        if isinstance(value, list):       # read as one value: "cannot read [0.5, 0.75] as a number"
+            raise CampaignError(f"{where}: [base] {key} = {value!r}: [base] holds one value per parameter; "
+                                "a list of values goes in [sweep] (every combination) or [[zip]] (side by side)")
     sweep = {k: _axis(v, f"[sweep] {k}", where) for k, v in _table(data.get("sweep", {}), "[sweep]", where).items()}
     raw_zips = data.get("zip", [])
     if isinstance(raw_zips, Mapping):          # a single [zip] table
