@@ -33,6 +33,8 @@ from tfm.params import ParameterWarning, parse_number
     # at 1e300 a NumPy overflow in the solver was the only message, then a pull-off of 2e-299
     (dict(self_term=1e300), r"self_term: must be > 0 and <= 1e\+06, got 1e\+300"),
     (dict(neighbor_rings=0), r"neighbor_rings: must be in \[1, 64\]"),
+    # the constructor said "allowed: none, events", leaving out the step count
+    (dict(snapshots="every"), r"snapshots: expected 'none', 'events' or a whole number k >= 1 .*got 'every'"),
     (dict(neighbor_rings=1.5), "neighbor_rings: expected an integer"),
     (dict(layout="hexagonal"), "operator: 'fft' needs a regular square grid"),
     (dict(jitter=0.7, layout="jittered", operator="direct"), "jitter"),

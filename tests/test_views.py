@@ -282,6 +282,21 @@ def test_plot_and_show_from_a_stored_run(stored_run, capsys):
     assert "nearest stored steps" in capsys.readouterr().err
 
 
+def test_show_names_what_to_give_for_a_campaign_folder_and_one_step(stored_run, tmp_path, capsys):
+    """`tfm show <campaign folder>` said "found 3; name the file", and each of the three
+    tables named was refused; a second --step replaced the first without a word (a hunt)."""
+    camp = tmp_path / "camp"
+    (camp / "runs").mkdir(parents=True)
+    (camp / "campaign.json").write_text("{}")
+    for table in ("summary", "curves", "failures"):
+        (camp / f"{table}.parquet").write_bytes(stored_run.read_bytes())
+    assert main(["show", str(camp)]) == 2
+    assert f"a campaign's folder; name one of its runs: {camp / 'runs'}/<run_id>.parquet" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:
+        main(["show", str(stored_run), "--step", "3", "--step", "5"])
+    assert stop.value.code == 2 and "--step given twice ('3' and '5')" in capsys.readouterr().err
+
+
 def test_a_run_without_a_pull_off_says_why_and_which_events_it_has(tmp_path, capsys):
     """`tfm show` of a run with no adhesion said only "no pull_off snapshot stored"; and the
     event names were not read like every other named value (" MAX_LOAD " was refused)."""

@@ -771,7 +771,9 @@ def _validate_protocol(p: Params) -> None:
     _choice("control", p.control, CONTROLS)
     snaps = p.snapshots
     if isinstance(snaps, str):
-        _choice("snapshots", snaps, SNAPSHOT_MODES)
+        if snaps not in SNAPSHOT_MODES:     # "allowed: none, events" left out the step count
+            raise ParameterError(f"snapshots: expected 'none', 'events' or a whole number k >= 1 (every k-th "
+                                 f"step), got {snaps!r}")
     else:
         _integer("snapshots", snaps, 1)
     if p.control == "displacement":

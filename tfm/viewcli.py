@@ -34,7 +34,7 @@ def register(sub) -> None:
                                       "(diverging colours, F_th marked), released springs, contact "
                                       "line, beside the force-indentation curve.")
     show.add_argument("run", help="curve .parquet, a folder with one, or a campaign run id")
-    show.add_argument("--step", default="pull_off",
+    show.add_argument("--step", default="pull_off", action=_Once,
                       help=f"a stored step number, or an event: {', '.join(EVENT_NAMES)} (default pull_off)")
     show.add_argument("-o", "--output", help="image path (default: <stem>.step<k>.png beside the curve)")
     _overwrite_flag(show)
@@ -55,6 +55,17 @@ def register(sub) -> None:
     anim.set_defaults(func=cmd_animate)
 
 
+class _Once(argparse.Action):
+    """An option given at most once: a second --step replaced the first without a word."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if getattr(namespace, f"_{self.dest}_given", False):
+            parser.error(f"{option_string} given twice ({getattr(namespace, self.dest)!r} and {values!r}); "
+                         "one view draws one step")
+        setattr(namespace, f"_{self.dest}_given", True)
+        setattr(namespace, self.dest, values)
+
+
 def _overwrite_flag(parser) -> None:
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an existing file given with -o (the default beside the run is "
@@ -72,6 +83,10 @@ def resolve_run(arg: str, results_dir: str | Path = "results") -> Path:
         found = sorted(q for q in p.glob("*.parquet") if not q.name.startswith("."))
         if len(found) == 1:
             return found[0]
+        if (p / "campaign.json").is_file() and (p / "runs").is_dir():
+            # a campaign's folder: its tables hold many runs, and naming one was refused too
+            raise ViewError(f"{p}: a campaign's folder; name one of its runs: {p / 'runs'}/<run_id>.parquet, "
+                            "or the run id alone (run ids: the run_id column of summary.parquet)")
         raise ViewError(f"{p}: expected one curve table in the folder, found {len(found)}; name the file")
     if re.fullmatch(r"[0-9a-f]{8,16}", p.name):
         found = sorted(Path(results_dir).glob(f"*/runs/{p.name}*.parquet"))
