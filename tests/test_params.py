@@ -33,6 +33,9 @@ from tfm.params import ParameterWarning, parse_number
     # at 1e300 a NumPy overflow in the solver was the only message, then a pull-off of 2e-299
     (dict(self_term=1e300), r"self_term: must be > 0 and <= 1e\+06, got 1e\+300"),
     (dict(neighbor_rings=0), r"neighbor_rings: must be in \[1, 64\]"),
+    # K_IC^2 overflowed inside the automatic preload: an OverflowError naming nothing (fuzzing)
+    (dict(k_th=1.3407807929942594e154, f_th=None), "max_indent: the automatic preload overflows for F_th"),
+    (dict(radius=1e300, k_th=0.02, f_th=None), "max_indent: the automatic preload overflows .* radius 1e\\+300"),
     # the constructor said "allowed: none, events", leaving out the step count
     (dict(snapshots="every"), r"snapshots: expected 'none', 'events' or a whole number k >= 1 .*got 'every'"),
     (dict(neighbor_rings=1.5), "neighbor_rings: expected an integer"),

@@ -229,7 +229,12 @@ class Params:
             return auto_max_indent(twin, step=self.step)
         if self.max_indent == "auto":
             from .theory import auto_max_indent
-            return auto_max_indent(self)
+            try:
+                return auto_max_indent(self)
+            except OverflowError:       # K_IC^2 or R^2 beyond floats (a fuzzed k_th of 1.3e154)
+                raise ParameterError(f"max_indent: the automatic preload overflows for F_th = "
+                                     f"{self.threshold_force:.3g} and radius {self.radius:.3g}; give max_indent, or "
+                                     "a threshold (k_th, f_th) and radius of a size a float can square") from None
         return float(self.max_indent)
 
     @property
