@@ -34,9 +34,8 @@ def axis_label(name: str, kind: str, p=None, note: str = "") -> str:
     """``name``, `` in m`` / `` in N`` for an SI run (``kind`` "length" or "force"), `` in
     L*`` / `` in F*`` for a run in paper units, then `` (note)``: the one spelling of units
     for every figure of a run. Without a run (the paper's figures), no unit."""
-    unit = unit_suffixes(p)[("length", "force").index(kind)]
-    if p is not None and not unit:
-        unit = (" $L^*$", " $F^*$")[("length", "force").index(kind)]
+    i = ("length", "force").index(kind)
+    unit = (unit_suffixes(p)[i] or (" $L^*$", " $F^*$")[i]) if p is not None else ""
     return name + (f" in{unit}" if unit else "") + (f" ({note})" if note else "")
 
 

@@ -147,6 +147,7 @@ class SnapshotWriter:
         self._events: dict[str, int] = {}
         self._snapshot_bytes = 17 * layout.n    # F and u (f8) and state (i1), before compression
         self.stopped: str | None = None         # why snapshots stopped early (_room)
+        self._stopped_step: int | None = None
         self.scale = force_scale(p)           # newtons per F* (1 in paper units)
         L, F_, A = CF_UNITS[p.units]
         units = ("the paper's nondimensional units: length L*, force F* = 2 pi G L*^2 / (1 - nu)"
@@ -254,6 +255,7 @@ class SnapshotWriter:
             if free < need:
                 # enough decimals that the two differ (both read 64.6 MiB in a hunt)
                 digits = next((d for d in range(1, 7) if f"{free / 2**20:.{d}f}" != f"{need / 2**20:.{d}f}"), 6)
+                self._stopped_step = step
                 self.stopped = (f"field snapshots stopped at step {step}: {free / 2**20:.{digits}f} MiB free on "
                                 f"{self._tmp.parent}, under the {need / 2**20:.{digits}f} MiB kept for the next "
                                 "snapshot and the table; the file holds the steps before")
@@ -300,6 +302,8 @@ class SnapshotWriter:
             self._f.attrs[f"{event}_step"] = step
         if summary is not None:
             self._f.attrs["summary"] = json.dumps(summary, sort_keys=True, default=_json_default)
+        if self.stopped is not None:     # the views say why later steps have no snapshot
+            self._f.attrs["stopped_at_step"] = self._stopped_step
         self._f.close()
         os.replace(self._tmp, self.path)
         LIVE_TEMPORARIES.discard(self._tmp)
@@ -314,6 +318,18 @@ class SnapshotWriter:
 
 
 # ---- reading (no xarray needed; xarray users: xr.open_dataset(path)) -------------
+def readable(path) -> bool:
+    """Whether ``path`` is a snapshots file that opens with its steps and fields (a
+    truncated file fails to open)."""
+    try:
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            return "step" in f and "F" in f
+    except (OSError, ValueError):
+        return False
+
+
 class Fields:
     """A fields file opened for reading: ``steps`` (sorted), ``snapshot(step)``."""
 

@@ -209,19 +209,18 @@ EVENT_ABSENT = {"pull_off": "the run never pulled (no step under tension: no adh
 
 
 def snapshots_cut_short(fields, unloading: bool = True) -> str | None:
-    """Why the run's snapshots end early, from the summary stored in the file: the disk
-    guard stopped them (tfm.snapshots), or (``unloading``) max_unload_steps stopped the
-    unloading."""
+    """Why the run's snapshots end early, from the file: the disk guard stopped them
+    (tfm.snapshots), or (``unloading``, from the stored summary) max_unload_steps stopped
+    the unloading."""
     import json
 
+    stopped = fields.attrs.get("stopped_at_step")
+    if stopped is not None:
+        return f"field snapshots stopped at step {int(stopped)} (too little disk space), so the later steps have none"
     try:
         summary = json.loads(fields.attrs.get("summary") or "{}")
     except (TypeError, ValueError):
         return None
-    stopped = next((w.split(":")[0] for w in str(summary.get("warnings") or "").split("; ")
-                    if w.startswith("field snapshots stopped at step")), None)
-    if stopped:
-        return f"{stopped} (too little disk space), so the later steps have none"
     if unloading and summary.get("unload_complete") is False:
         return ("unloading stopped at max_unload_steps with springs still in contact, before the events "
                 "after it (raise max_unload_steps)")

@@ -67,18 +67,6 @@ class Status:
         return len(self.done) + len(self.failed) + len(self.pending)
 
 
-def _snapshots_readable(path: Path) -> bool:
-    """Whether a run's field snapshots file is there and opens as HDF5 (NetCDF4) with its
-    steps: a truncated file fails to open."""
-    try:
-        import h5py
-
-        with h5py.File(path, "r") as f:
-            return "step" in f and "F" in f
-    except (OSError, ValueError):
-        return False
-
-
 def code_here() -> dict[str, Any]:
     """What names the code this process computes with, as a run's provenance does."""
     return {"tfm_version": tfm_version(), "git_commit": loaded_commit(), "code_hash": code_hash()}
@@ -279,12 +267,14 @@ class CampaignStore:
             return None
 
     def status(self, spec: CampaignSpec) -> Status:
+        from ..snapshots import readable as snapshots_readable
+
         done, failed, pending, flagged, stale, damaged = [], [], [], [], [], []
         here = code_here()
         for run in spec.runs:
             rid = run.run_id
             meta = self.run_metadata(rid)
-            if meta is not None and meta.get("fields") and not _snapshots_readable(self.runs_dir / meta["fields"]):
+            if meta is not None and meta.get("fields") and not snapshots_readable(self.runs_dir / meta["fields"]):
                 # a run stored with snapshots counts as done only with them (a deleted or
                 # truncated file was "done" and only tfm show noticed)
                 pending.append(rid)
