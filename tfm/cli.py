@@ -24,7 +24,7 @@ PARAM_HELP = {
     "radius": "radius R of the body",
     "shape": "sphere | paraboloid | flat_punch | height_map",
     "kernel": "boussinesq | local | neighbors",
-    "self_term": "C_ii = self_term / sqrt(A) (the paper's 3.8)",
+    "self_term": "C_ii = self_term / sqrt(A), in (0, 1e6] (the paper's 3.8)",
     "neighbor_rings": "kernel=neighbors: keep 1/r for r <= m * spacing (with self_term 3.8, m >= 2 is "
                       "needed for a positive definite compliance; the default 1 goes with a larger self_term)",
     "c_w": "kernel=local: Winkler compliance, C_ii = c_w / A",
