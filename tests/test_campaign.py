@@ -770,7 +770,35 @@ def test_a_campaign_that_cannot_fit_is_refused_before_any_run(tmp_path, monkeypa
     monkeypatch.setattr("tfm.guards.available_memory", lambda: 100 * 2 ** 20)
     with pytest.raises(CampaignError, match=r"needs about .* GiB for 2 at once, but 0.10 GiB is available"):
         run_campaign(SMOKE, jobs=2, quiet=True, results_dir=tmp_path)
-    assert not list((tmp_path / "smoke").rglob("*.parquet"))
+    # no folder either: its campaign.json claimed the name for a file that ran nothing, and
+    # refused another file of that name (a user's hunt)
+    assert not (tmp_path / "smoke").exists()
+
+
+def test_a_refusal_leaves_a_folder_that_was_there_as_it_was(tmp_path, monkeypatch):
+    (tmp_path / "smoke").mkdir()
+    (tmp_path / "smoke" / "notes.txt").write_text("mine")
+    monkeypatch.setattr("tfm.guards.available_memory", lambda: 100 * 2 ** 20)
+    with pytest.raises(CampaignError, match="needs about"):
+        run_campaign(SMOKE, jobs=2, quiet=True, results_dir=tmp_path)
+    assert not (tmp_path / "smoke" / "campaign.json").exists()
+    assert (tmp_path / "smoke" / "notes.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize("table", ["summary", "curves", "failures"])
+def test_tables_that_no_campaign_wrote_are_not_replaced(tmp_path, table, capsys):
+    """A summary.parquet of the user's own, in the folder a campaign's name points to, was
+    overwritten without a word (a user's hunt)."""
+    folder = tmp_path / "smoke"
+    folder.mkdir()
+    mine = folder / f"{table}.parquet"
+    pd.DataFrame({"x": [1.0, 2.0]}).to_parquet(mine)
+    before = mine.read_bytes()
+    with pytest.raises(CampaignError, match=rf"{table}.parquet is not a table of a tfm campaign"):
+        run_campaign(SMOKE, quiet=True, results_dir=tmp_path)
+    assert mine.read_bytes() == before and not (folder / "campaign.json").exists()
+    assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path)]) == 2
+    assert "is not a table of a tfm campaign" in capsys.readouterr().err
 
 
 # ---- one results folder per campaign file -------------------------------------------------

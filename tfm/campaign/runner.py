@@ -160,74 +160,94 @@ def _run_claimed(spec, client, jobs, quiet, results_dir, retry_failed, rerun_sta
                  checkpoint_every, left_out_as) -> Path:
     """run_campaign from the claim of its folder on (``client``: a connected Dask client)."""
     store = CampaignStore.for_spec(spec, results_dir)
-    with store.lock():
-        store.claim(spec)
-        store.clean_temporary()
-        status = store.status(spec)
-        redo = set(status.pending) | (set(status.failed) if retry_failed else set())
-        if status.stale:
-            if rerun_stale:
-                redo |= set(status.stale)
+    fresh = not store.root.exists()
+    try:
+        with store.lock():
+            return _run_locked(spec, store, client, jobs, quiet, retry_failed, rerun_stale, only,
+                               checkpoint_every, left_out_as)
+    except CampaignError:
+        if fresh and not store.source_record():
+            # refused before the claim: leave no folder that names this campaign
+            with contextlib.suppress(OSError):
+                (store.root / ".lock").unlink(missing_ok=True)
+                store.root.rmdir()
+        raise
+
+
+def _run_locked(spec, store, client, jobs, quiet, retry_failed, rerun_stale, only,
+                checkpoint_every, left_out_as) -> Path:
+    """_run_claimed with the campaign's lock held: the checks that may refuse the campaign,
+    then the claim of its folder, the runs and the tables."""
+    conflict = store.source_conflict(spec)
+    if conflict:
+        raise CampaignError(conflict)
+    store.clean_temporary()
+    status = store.status(spec)
+    redo = set(status.pending) | (set(status.failed) if retry_failed else set())
+    if status.stale:
+        if rerun_stale:
+            redo |= set(status.stale)
+        else:
+            print(f"warning: campaign {spec.name}: {len(status.stale)} stored runs were computed "
+                  "by other tfm source code (prov_code_hash, a hash of its files; see prov_git_commit); "
+                  "they are kept. Use --rerun-stale to recompute them.", file=sys.stderr)
+    extra = store.extra_note(status)
+    if extra:                          # even with quiet: their rows leave the tables
+        print(f"campaign {spec.name}: {extra}", file=sys.stderr)
+    damaged = store.damaged_note(status)
+    if damaged:                        # even with quiet: stored data were lost
+        print(f"warning: campaign {spec.name}: {damaged}", file=sys.stderr)
+    left_out = ""                       # pending runs outside ``only``, said as left_out_as
+    if only is not None:                 # run ids, or the Run records select_runs returns
+        chosen = {getattr(r, "run_id", r) for r in only}
+        n_out = len(redo - chosen)
+        left_out = f"{n_out} {left_out_as}" if n_out else ""
+        redo &= chosen
+    todo = [run for run in spec.runs if run.run_id in redo]
+    if todo and client is None:
+        _check_memory(spec, todo, min(jobs, len(todo)))
+    _check_cost(spec, todo)
+    costly = [(run, note) for run in todo if (note := direct_cost_note(run.params))]
+    if costly:                           # even with quiet: hours may be at stake
+        run, note = max(costly, key=lambda rn: n_springs(rn[0].params))
+        print(f"campaign {spec.name}: {len(costly)} run{'s' if len(costly) > 1 else ''} of the direct sum "
+              f"may take long; the largest, run {run.index}: {note}", file=sys.stderr)
+    noted = [run for run in todo if run.notes]
+    if noted:                            # warnings stay with quiet (its help says so)
+        for run in noted[:3]:
+            print(f"warning: campaign {spec.name}: run {run.index}: {'; '.join(run.notes)}", file=sys.stderr)
+        if len(noted) > 3:
+            print(f"warning: campaign {spec.name}: {len(noted) - 3} more runs with such notes "
+                  "(they are flagged in the summary)", file=sys.stderr)
+    store.claim(spec)                     # after every check that may refuse it
+    stop, handled = _Stop(), set()
+    with stop.installed():
+        if todo:
+            ckpt = (store, checkpoint_every)
+            if client is not None:
+                outcomes = _run_dask(todo, client, stop)
+            elif jobs > 1 and len(todo) > 1:
+                outcomes = _run_pool(todo, jobs, ckpt, stop)
             else:
-                print(f"warning: campaign {spec.name}: {len(status.stale)} stored runs were computed "
-                      "by other tfm source code (prov_code_hash, a hash of its files; see prov_git_commit); "
-                      "they are kept. Use --rerun-stale to recompute them.", file=sys.stderr)
-        extra = store.extra_note(status)
-        if extra:                          # even with quiet: their rows leave the tables
-            print(f"campaign {spec.name}: {extra}", file=sys.stderr)
-        damaged = store.damaged_note(status)
-        if damaged:                        # even with quiet: stored data were lost
-            print(f"warning: campaign {spec.name}: {damaged}", file=sys.stderr)
-        left_out = ""                       # pending runs outside ``only``, said as left_out_as
-        if only is not None:                 # run ids, or the Run records select_runs returns
-            chosen = {getattr(r, "run_id", r) for r in only}
-            n_out = len(redo - chosen)
-            left_out = f"{n_out} {left_out_as}" if n_out else ""
-            redo &= chosen
-        todo = [run for run in spec.runs if run.run_id in redo]
-        if todo and client is None:
-            _check_memory(spec, todo, min(jobs, len(todo)))
-        _check_cost(spec, todo)
-        costly = [(run, note) for run in todo if (note := direct_cost_note(run.params))]
-        if costly:                           # even with quiet: hours may be at stake
-            run, note = max(costly, key=lambda rn: n_springs(rn[0].params))
-            print(f"campaign {spec.name}: {len(costly)} run{'s' if len(costly) > 1 else ''} of the direct sum "
-                  f"may take long; the largest, run {run.index}: {note}", file=sys.stderr)
-        noted = [run for run in todo if run.notes]
-        if noted:                            # warnings stay with quiet (its help says so)
-            for run in noted[:3]:
-                print(f"warning: campaign {spec.name}: run {run.index}: {'; '.join(run.notes)}", file=sys.stderr)
-            if len(noted) > 3:
-                print(f"warning: campaign {spec.name}: {len(noted) - 3} more runs with such notes "
-                      "(they are flagged in the summary)", file=sys.stderr)
-        stop, handled = _Stop(), set()
-        with stop.installed():
-            if todo:
-                ckpt = (store, checkpoint_every)
-                if client is not None:
-                    outcomes = _run_dask(todo, client, stop)
-                elif jobs > 1 and len(todo) > 1:
-                    outcomes = _run_pool(todo, jobs, ckpt, stop)
-                else:
-                    outcomes = _run_serial(todo, ckpt, stop)
-                try:
-                    _consume(spec, store, todo, outcomes, skipped=len(set(status.done) - redo), quiet=quiet,
-                             handled=handled, left_out=left_out)
-                except KeyboardInterrupt:
-                    if stop.signum is None:
-                        raise
-            elif not quiet:
-                # runs not done and not selected: they are not "done" (tfm limit's kept points)
-                print(f"campaign {spec.name}: nothing to run, {len(status.done)} of {len(spec.runs)} runs "
-                      f"already done" + (f", {left_out}" if left_out else "")
-                      + f" -> {store.root}", file=sys.stderr)
+                outcomes = _run_serial(todo, ckpt, stop)
             try:
-                store.write_tables(spec)
-            except OSError as exc:
-                raise CampaignStorageError(
-                    f"cannot write the campaign's tables in {store.root}: {exc.strerror or exc}. Every run is "
-                    f"stored in {store.runs_dir}; free space or fix the permissions, then run "
-                    f"{_again(spec, store)} again to write them") from None
+                _consume(spec, store, todo, outcomes, skipped=len(set(status.done) - redo), quiet=quiet,
+                         handled=handled, left_out=left_out)
+            except KeyboardInterrupt:
+                if stop.signum is None:
+                    raise
+        elif not quiet:
+            # runs not done and not selected: they are not "done" (tfm limit's kept points)
+            print(f"campaign {spec.name}: nothing to run, {len(status.done)} of {len(spec.runs)} runs "
+                  f"already done" + (f", {left_out}" if left_out else "")
+                  + f" -> {store.root}", file=sys.stderr)
+        try:
+            store.write_tables(spec)
+        except OSError as exc:
+            raise CampaignStorageError(
+                f"cannot write the campaign's tables in {store.root}: {exc.strerror or exc}. Every run is "
+                f"stored in {store.runs_dir}; free space or fix the permissions, then run "
+                f"{_again(spec, store)} again to write them") from None
     if stop.signum is not None:
         left = [r for r in todo if r.run_id not in handled]
         if left:

@@ -185,7 +185,15 @@ class CampaignStore:
         """Why ``spec`` may not write here, or None. The same file (edited: resume with
         its new runs) or the same content (moved, copied) may; another file may not."""
         rec = self.source_record()
-        if rec is None or rec.get("sha256") == spec.digest:
+        if rec is None:
+            foreign = self.foreign_tables()
+            if foreign:
+                return (f"{foreign[0]} is not a table of a tfm campaign, and campaign {spec.name!r} would "
+                        f"write its {foreign[0].name} there; move {'those files' if len(foreign) > 1 else 'it'} "
+                        f"({', '.join(p.name for p in foreign)}) away, or give the campaign another name "
+                        "or --results-dir")
+            return None
+        if rec.get("sha256") == spec.digest:
             return None
         if spec.origin and rec.get("origin") == spec.origin:
             return None
@@ -196,6 +204,21 @@ class CampaignStore:
                 f"the same name {spec.name!r}. Give it its own name, or another --results-dir. If it is that "
                 f"file, moved and edited, delete {self.root / 'campaign.json'} and it takes over these "
                 "results (runs with the same parameters are reused)")
+
+    def foreign_tables(self) -> list[Path]:
+        """The summary, curves and failures tables here that no tfm campaign wrote (their
+        footer lacks the campaign record): a campaign would replace them."""
+        foreign = []
+        for table in TABLES:
+            path = self.table_path(table)
+            if path.exists():
+                try:
+                    ours = "campaign" in read_metadata(path)
+                except (OSError, ValueError):     # not Parquet at all
+                    ours = False
+                if not ours:
+                    foreign.append(path)
+        return foreign
 
     def claim(self, spec: CampaignSpec) -> None:
         """Record which campaign file writes here (call with the lock held)."""
