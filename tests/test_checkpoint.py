@@ -233,7 +233,11 @@ def test_a_damaged_checkpoint_is_set_aside_not_a_failure_for_good(tmp_path, caps
     store.checkpoint_path(rid).parent.mkdir(parents=True)
     store.checkpoint_path(rid).write_bytes(b"PK\x03\x04" + bytes(200))       # a cut-off archive
     assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path / "res"), "-v"]) == 0
-    assert "cannot be read (damaged?): the run will start afresh" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "cannot be read (damaged?): the run will start afresh" in out
+    # the count said it would continue from it (a user's hunt)
+    assert "1 unfinished run has a checkpoint that cannot be continued from (see below): it starts afresh" in out
+    assert "continues from it" not in out
     root = run_campaign(spec, results_dir=tmp_path / "res", quiet=True)
     assert "cannot be read (BadZipFile" in capsys.readouterr().err          # a warning line, even with quiet
     summary, curves = load_tables(root)
@@ -260,7 +264,7 @@ def test_a_checkpoint_that_cannot_serve_is_refused_before_any_computation(tmp_pa
         run_campaign(load_spec(SMOKE), results_dir=tmp_path, checkpoint_every=-1)
 
 
-def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, capsys):
+def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, capsys, monkeypatch):
     """The first run of the smoke campaign crashes after 10 steps (a failure is recorded,
     its checkpoint stays); the next `campaign run` continues it from step 9 and the tables
     equal those of an uninterrupted campaign."""
@@ -274,7 +278,13 @@ def test_a_campaign_run_that_crashed_continues_from_its_checkpoint(tmp_path, cap
     assert store.status(spec).failed == [first]
     assert store.checkpoint_path(first).exists()
     assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path / "crashed")]) == 1
-    assert "1 unfinished runs have a checkpoint" in capsys.readouterr().out
+    assert "1 unfinished run has a checkpoint: it continues from it" in capsys.readouterr().out
+    with monkeypatch.context() as m:              # as after an edit of tfm's source
+        m.setattr("tfm.checkpoint.code_hash", lambda: "another")
+        tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path / "crashed"), "-v"])
+        out = capsys.readouterr().out
+    assert "was written by another version of tfm's source" in out and "it starts afresh" in out
+    assert "continues from it" not in out
 
     # resumed with --no-checkpoints (checkpoint_every=None): the saved state still serves
     # (it was deleted unused and the run computed again from its first step)

@@ -200,13 +200,9 @@ class Checkpoint:
             meta = json.loads(str(arrays.pop("meta")))
         except UNREADABLE as exc:          # a truncated or damaged file too (BadZipFile)
             return self._refuse(f"cannot be read ({type(exc).__name__}: {exc})")
-        if meta.get("format") != FORMAT:
-            return self._refuse(f"has format {meta.get('format')!r}, this engine reads {FORMAT}")
-        if meta.get("run_id") != self.run_id:
-            return self._refuse(f"belongs to run {meta.get('run_id')!r}")
-        if meta.get("code") != code_hash():
-            return self._refuse("was written by another version of tfm's source, which cannot "
-                                "promise the same numbers")
+        why = unusable(meta, self.run_id)
+        if why:
+            return self._refuse(why)
         out = CurveResult(**meta["counters"])
         cols = {f.name: arrays.pop(f"curve.{f.name}") for f in fields(StepRecord)}
         out.steps = [StepRecord(*(_plain(cols[f.name][i]) for f in fields(StepRecord)))
@@ -279,6 +275,17 @@ class Checkpoint:
 # what reading a damaged checkpoint raises: a truncated archive or a flipped bit gives
 # zipfile.BadZipFile ("Bad CRC-32"), which is none of the others
 UNREADABLE = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile)
+
+
+def unusable(meta: dict, run_id: str) -> str | None:
+    """Why a checkpoint with metadata ``meta`` cannot continue run ``run_id``, or None."""
+    if meta.get("format") != FORMAT:
+        return f"has format {meta.get('format')!r}, this engine reads {FORMAT}"
+    if meta.get("run_id") != run_id:
+        return f"belongs to run {meta.get('run_id')!r}"
+    if meta.get("code") != code_hash():
+        return "was written by another version of tfm's source, which cannot promise the same numbers"
+    return None
 
 
 def read_meta(path: str | os.PathLike) -> dict | None:

@@ -163,7 +163,15 @@ def cmd_status(args) -> int:
               f"`{store.run_command(args.file)}` rebuilds them")
     saved = _checkpoints(store, st.pending + st.failed)
     if saved:
-        print(f"  {len(saved)} unfinished runs have a checkpoint: they continue from it")
+        usable = sum(ok for ok, _ in saved.values())
+        said = []
+        if usable:
+            said.append(f"{usable} unfinished run{'s have a checkpoint: they continue' if usable > 1 else ' has a checkpoint: it continues'} from it")
+        if len(saved) - usable:
+            n = len(saved) - usable
+            said.append(f"{n} unfinished run{'s have a checkpoint' if n > 1 else ' has a checkpoint'} that "
+                        f"cannot be continued from (see below): {'they start' if n > 1 else 'it starts'} afresh")
+        print("  " + "; ".join(said))
     orphans = store.orphan_checkpoints(spec)
     if orphans:
         print(f"  {len(orphans)} checkpoints in {store.checkpoints_dir} belong to runs no longer in the file "
@@ -178,7 +186,7 @@ def cmd_status(args) -> int:
             if state[rid] == "failed":
                 line += f"  {(store.read_failure(rid) or {}).get('error', '')}"
             if rid in saved:
-                line += f"  [{saved[rid]}]"
+                line += f"  [{saved[rid][1]}]"
             print(line)
     return 1 if st.failed else 0
 
@@ -190,23 +198,26 @@ def _check_results_dir(results_dir: str) -> None:
         raise CampaignError(f"results-dir: {results_dir} is not a folder")
 
 
-def _checkpoints(store, run_ids) -> dict[str, str]:
-    """run id -> what its checkpoint holds, for the runs in ``run_ids`` that have one."""
+def _checkpoints(store, run_ids) -> dict[str, tuple[bool, str]]:
+    """run id -> (whether the run continues from it, what its checkpoint holds), for the
+    runs in ``run_ids`` that have one."""
     if not store.checkpoints_dir.is_dir():
         return {}
-    from ..checkpoint import read_meta
+    from ..checkpoint import read_meta, unusable
 
     saved = {}
     for rid in run_ids:
         path = store.checkpoint_path(rid)
         if path.exists():
             meta = read_meta(path)
-            if meta is None:
-                saved[rid] = f"checkpoint {path} cannot be read (damaged?): the run will start afresh"
+            why = "cannot be read (damaged?)" if meta is None else unusable(meta, rid)
+            if why:
+                saved[rid] = (False, f"checkpoint {path} {why}: the run will start afresh")
                 continue
             elapsed = float(meta.get("elapsed", float("nan")))
             spent = f"{elapsed:.0f} s" if elapsed < 60 else f"{elapsed / 60:.1f} min"
-            saved[rid] = f"checkpoint: {meta.get('steps', '?')} steps, {spent}, written {meta.get('written_at', '?')}"
+            saved[rid] = (True, f"checkpoint: {meta.get('steps', '?')} steps, {spent}, "
+                                f"written {meta.get('written_at', '?')}")
     return saved
 
 
