@@ -1543,3 +1543,21 @@ def test_runs_left_out_are_named_as_the_caller_says(tmp_path, capsys):
     spec = _tiny("kept")
     run_campaign(spec, results_dir=tmp_path, only=[], left_out_as="with a kept point")
     assert "nothing to run, 0 of 2 runs already done, 2 with a kept point" in capsys.readouterr().err
+
+
+def test_status_says_a_changed_height_map_left_the_tables_behind(tmp_path, capsys):
+    """The map's content changed under an unchanged campaign file: the run files are all
+    there, yet status called them "gone or damaged" (a user's hunt)."""
+    x = (np.arange(33) - 16) / 32
+    bowl = (x[:, None] ** 2 + x[None, :] ** 2) / 2
+    np.save(tmp_path / "bowl.npy", bowl)
+    toml = tmp_path / "bowl.toml"
+    toml.write_text(f'name = "bowl"\n[base]\nspacing = "1/32"\nshape = "height_map"\n'
+                    f'height_map = "{tmp_path / "bowl.npy"}"\nk_th = 0.02\nmax_indent = 0.05\nstep = 5e-3\n')
+    run_campaign(toml, quiet=True, results_dir=tmp_path)
+    np.save(tmp_path / "bowl.npy", 1.5 * bowl)                # another body, same file name
+    capsys.readouterr()
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "out of date: they hold runs the campaign file no longer expands to" in out
+    assert "gone or damaged" not in out

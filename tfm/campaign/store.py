@@ -428,7 +428,8 @@ class CampaignStore:
 
     def tables_behind(self, spec: CampaignSpec, status: Status | None = None) -> str | None:
         """Why the tables do not hold the stored runs as they are now (None: they do)."""
-        record = self._record(spec, status or self.status(spec))
+        status = status or self.status(spec)
+        record = self._record(spec, status)
         if self._tables_current(record):
             return None
         try:
@@ -444,6 +445,10 @@ class CampaignStore:
         if now - then:
             return "runs were stored after they were written, by a campaign process that stopped before rebuilding them"
         if then - now:
+            if (then - now) <= set(status.extra):
+                # the run files are there: the file expands to other run ids now
+                return ("they hold runs the campaign file no longer expands to (stored runs whose parameters, "
+                        "or height map's content, are no longer those of the file)")
             return "they hold runs whose files are now gone or damaged (those runs are pending again)"
         if (written.get("run_ids"), written.get("failed")) != (record["run_ids"], record["failed"]):
             return "runs have moved between done and failed since they were written"
