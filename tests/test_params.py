@@ -315,7 +315,7 @@ def test_a_loose_tree_opening_angle_is_a_note_of_the_run():
 
     base = dict(spacing="1/48", k_th=0.02, shape="paraboloid", max_indent=0.05, operator="tree")
     notes = check(Params.from_dict(dict(base, theta=1.0)), memory=False)
-    assert len(notes) == 1 and notes[0].startswith("theta: 1 is loose: the tree's error bound is 1")
+    assert len(notes) == 1 and notes[0].startswith("theta: 1 is loose: the tree's error bound is 103 % of sum |f|/r")
     assert check(Params.from_dict(dict(base, theta=0.7)), memory=False) == []
     assert check(Params.from_dict(dict(base, theta=0.7)).replace(theta=1.0), memory=False) == notes
 

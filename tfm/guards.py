@@ -442,8 +442,9 @@ def check(p, memory: bool = True) -> list[str]:
         notes += check_cost(p)
     if p.operator == "tree" and p.kernel == "boussinesq" and p.theta > LOOSE_THETA:
         from .tree_operator import tree_error_bound
-        notes.append(f"theta: {p.theta:g} is loose: the tree's error bound is {tree_error_bound(p.theta):.2g} of "
-                     f"sum |f|/r at each target ({tree_error_bound(0.5):.2g} at 0.5), and snap decisions follow "
+        # percentages with 3 digits: at theta 1 the bound is 1.03, which .2g called "1"
+        notes.append(f"theta: {p.theta:g} is loose: the tree's error bound is {100 * tree_error_bound(p.theta):.3g} % "
+                     f"of sum |f|/r at each target ({100 * tree_error_bound(0.5):.2g} % at 0.5), and snap decisions follow "
                      "it (theta 1 against the direct sum, spacing 1/48: the pull-off indent 18 steps off); "
                      f"theta <= {LOOSE_THETA:g} kept the pull-off within 5e-6")
     slope = surface_rms_slope(p)
