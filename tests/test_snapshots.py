@@ -216,7 +216,7 @@ def test_snapshots_stop_before_the_disk_is_full_and_the_run_is_kept(tmp_path, mo
     from tfm.viewcli import ViewError, animate, pick_step
     for event in ("pull_off", "max_load"):
         with pytest.raises(ViewError, match=rf"no {event} snapshot: field snapshots stopped at step 6 \(too little "
-                                            "disk space\)"):
+                                            r"disk space\)"):
             pick_step(f, event)
     with pytest.raises(ViewError, match="no unloading snapshot to animate: field snapshots stopped at step 6 .*"
                                         "--all-phases animates the loading"):
@@ -333,3 +333,30 @@ def test_snapshots_at_a_path_of_the_callers_stay_there(tmp_path):
     assert mine.exists() and (tmp_path / "a.fields.nc").read_bytes() == mine.read_bytes()
     with pytest.raises(tfm.ParameterError, match="fields_path: .*x.txt must end with .nc"):
         tfm.simulate(spacing=1 / 16, snapshots="events", fields_path=tmp_path / "x.txt", **STANDARD)
+
+
+def test_snapshot_files_are_sized_before_the_run(tmp_path, capsys):
+    """--snapshots 1 at a fine spacing filled the disk with no word before the run (a
+    916 MB file at 1/256), and --snapshots 10000 on a 130-step run stored step 0 and the
+    events with no word either (users' hunts)."""
+    from tfm.cli import main
+    from tfm.guards import n_springs
+    from tfm.snapshots import BYTES_PER_SPRING_RAW, size_note
+
+    p = tfm.Params.from_dict(dict(STANDARD, spacing="1/32", step=1e-3, snapshots=1))
+    assert size_note(p) is None                      # 132 snapshots of 841 springs: no note
+    # what the estimate promises holds for a real run: at least its count of snapshots,
+    # none larger than F, u and the state uncompressed
+    res = tfm.simulate(p, fields_path=tmp_path / "s.fields.nc")
+    with Fields(res.fields_path) as f:
+        stored = len(f.steps)
+    assert stored >= 2 * 50 + 1
+    assert (tmp_path / "s.fields.nc").stat().st_size <= stored * n_springs(p) * BYTES_PER_SPRING_RAW
+    big = p.replace(spacing=1 / 1024, step=2.5e-4)   # 366,025 springs, 200 loading steps
+    assert re.search(r"every step of 366,025 springs: at least 401 snapshots .* 0\.82-2\.3 GiB", size_note(big))
+    assert size_note(big.replace(snapshots=10)) is None
+    assert size_note(p, folder=tmp_path) is None
+    assert main(["run", "--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.05",
+                 "--step", "1e-3", "--snapshots", "10000", "-q", "-o", str(tmp_path / "k.parquet")]) == 0
+    assert ("tfm: note: snapshots: every 10000th step, but the loading has 50 steps"
+            in capsys.readouterr().err)

@@ -259,6 +259,11 @@ def _run_and_write(args, p: Params, notes, out: Path, plot: Path | None, ckpt: d
     cost = direct_cost_note(p)
     if cost:                              # even with -q: hours may be at stake
         print(f"tfm: note: {cost}", file=sys.stderr)
+    if p.snapshots != "none":
+        from .snapshots import size_note
+        size = size_note(p)
+        if size:                          # even with -q: a full disk may be at stake
+            print(f"tfm: note: {size}", file=sys.stderr)
     with warnings.catch_warnings(record=True) as caught, run_progress(p, quiet=args.quiet) as progress:
         warnings.simplefilter("ignore", RunWarning)     # the summary's warnings are printed at the end
         warnings.simplefilter("always", CheckpointWarning)

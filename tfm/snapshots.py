@@ -108,6 +108,44 @@ def remove_dead_temporary_fields(folder: str | os.PathLike | None = None,
                              ["tfm-*.fields.nc", ".tfm-*.fields.nc.*.tmp"], pattern, min_age, own=True)
 
 
+# Bytes a snapshot takes per spring on disk: F and u in float64 and the state byte are 17
+# before compression; compressed, 5.8-6.4 measured (smooth paraboloid, 1/32 and 1/64,
+# snapshots 1, 2026-11-25). Rough surfaces compress less.
+BYTES_PER_SPRING_RAW, BYTES_PER_SPRING_PACKED = 17.0, 6.0
+LARGE_SNAPSHOTS = 2**30        # estimates above this are said before the run
+
+
+def size_note(p, folder: str | os.PathLike | None = None) -> str | None:
+    """What to say before a run with ``snapshots = k`` (None: nothing): the files' size
+    when it may be large, or exceed the free disk of the temporary folder they are written
+    to first (the disk guard stops them when it fills, keeping the curve); and a k so large
+    that few steps besides step 0 and the events are stored. The unloading has at least
+    as many steps as the loading, usually more (about 1.6 times at spacing 1/64)."""
+    from .guards import n_springs
+    from .protocol import n_loading_steps
+
+    if not isinstance(p.snapshots, int):
+        return None
+    k, loading = p.snapshots, n_loading_steps(p)
+    if k > 2 * loading:
+        return (f"snapshots: every {k}th step, but the loading has {loading} steps (the unloading usually "
+                "1-2 times as many): few steps besides step 0 and the events (snapshots='events') will be stored")
+    count = 2 * loading // k + 1          # at least: the unloading as long as the loading
+    n = n_springs(p)
+    low, high = count * n * BYTES_PER_SPRING_PACKED, count * n * BYTES_PER_SPRING_RAW
+    try:
+        free = shutil.disk_usage(folder or tempfile.gettempdir()).free
+    except OSError:
+        free = None
+    if high < LARGE_SNAPSHOTS and (free is None or high < free / 2):
+        return None
+    room = "" if free is None else f"; {free / 2**30:.1f} GiB free in {folder or tempfile.gettempdir()}, where they are written first"
+    return (f"snapshots: every {f'{k}th ' if k > 1 else ''}step of {n:,} springs: at least {count:,} snapshots "
+            f"(the unloading as long as the loading), {low / 2**30:.2g}-{high / 2**30:.2g} GiB "
+            f"(compressed, and not){room}. A larger k, or snapshots='events', keeps the files small; "
+            "the snapshots stop, keeping the curve, if the disk fills")
+
+
 class _Copy:
     """One step's fields, copied (an event candidate)."""
 

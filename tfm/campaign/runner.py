@@ -212,6 +212,12 @@ def _run_locked(spec, store, client, jobs, quiet, retry_failed, rerun_stale, onl
         run, note = max(costly, key=lambda rn: n_springs(rn[0].params))
         print(f"campaign {spec.name}: {len(costly)} run{'s' if len(costly) > 1 else ''} of the direct sum "
               f"may take long; the largest, run {run.index}: {note}", file=sys.stderr)
+    from ..snapshots import size_note
+    sized = [(run, note) for run in todo if run.params.snapshots != "none" and (note := size_note(run.params))]
+    if sized:                            # even with quiet: a full disk may be at stake
+        run, note = sized[0]
+        print(f"campaign {spec.name}: {len(sized)} run{'s' if len(sized) > 1 else ''} with field snapshots to "
+              f"note; run {run.index}: {note}", file=sys.stderr)
     noted = [run for run in todo if run.notes]
     if noted:                            # warnings stay with quiet (its help says so)
         for run in noted[:3]:
