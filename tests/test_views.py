@@ -358,6 +358,32 @@ def test_animate_makes_a_gif_with_one_frame_per_unloading_snapshot(stored_run, t
     assert len(rgb) > 1 and len(used) <= 256, len(used)
 
 
+def test_animate_thins_many_snapshots_to_max_frames_and_keeps_the_events(stored_run, tmp_path, capsys):
+    """1257 snapshots made a GIF of 1257 frames, in four minutes and 900 MB (a user's hunt)."""
+    from PIL import Image
+
+    from tfm.snapshots import EVENTS, Fields
+    from tfm.viewcli import frame_steps, thin_frames
+
+    fields = Fields(stored_run.with_name("curve.fields.nc"))
+    steps = frame_steps(fields, pd.read_parquet(stored_run))
+    events = {fields.event_step(e) for e in EVENTS} & set(steps)
+    assert len(steps) > 8 and events
+    thin = thin_frames(steps, 8, keep=events)
+    k = -(-len(steps) // 8)
+    # every k-th, the last, the events, and nothing else, in order
+    assert thin == [s for i, s in enumerate(steps) if i % k == 0 or i == len(steps) - 1 or s in events]
+    assert thin_frames(steps, 0) == steps == thin_frames(steps, len(steps))
+    out = tmp_path / "thin.gif"
+    assert main(["animate", str(stored_run), "-o", str(out), "--max-frames", "8"]) == 0
+    err = capsys.readouterr().err
+    assert f"{len(thin)} frames" in err and f"{len(steps)} snapshots to animate, more than --max-frames 8" in err
+    assert Image.open(out).n_frames == len(thin)
+    for bad in ("-1", "1"):
+        assert main(["animate", str(stored_run), "-o", str(out), "--max-frames", bad, "--overwrite"]) == 2
+        assert "--max-frames:" in capsys.readouterr().err
+
+
 def test_a_failed_animation_leaves_the_earlier_one_whole(stored_run, tmp_path, monkeypatch, capsys):
     """A write that failed with --overwrite (an fps too low for a GIF, then) left the old
     GIF truncated to 416 unreadable bytes."""

@@ -51,6 +51,9 @@ def register(sub) -> None:
                       help=f"frames per second (default {DEFAULT_FPS:g}; 0.01 to {GIF_MAX_FPS:g} for a GIF, which viewers "
                            "play at 10 fps above that; at least 0.01 for MP4)")
     anim.add_argument("--all-phases", action="store_true", help="loading too, not only the unloading")
+    anim.add_argument("--max-frames", type=int, default=DEFAULT_MAX_FRAMES,
+                      help=f"at most this many frames (default {DEFAULT_MAX_FRAMES}): of more stored snapshots every "
+                           "k-th is used, with the first, the last and the events; 0: all")
     _overwrite_flag(anim)
     anim.set_defaults(func=cmd_animate)
 
@@ -327,9 +330,16 @@ def _animate(args) -> Path:
     path = resolve_run(args.run)
     out = _output(args, path.with_suffix(".gif"), ANIMATION_SUFFIXES)
     check_fps(args.fps, out)
+    check_max_frames(args.max_frames)
     curve, params, fpath = load_run(path)
     fields = _need_fields(path, fpath, params)
-    n = animate(fields, curve, params, out, fps=args.fps, unload_only=not args.all_phases)
+    n = animate(fields, curve, params, out, fps=args.fps, unload_only=not args.all_phases,
+                max_frames=args.max_frames)
+    stored = len(frame_steps(fields, curve, not args.all_phases))
+    if n < stored:
+        print(f"tfm: note: {stored} snapshots to animate, more than --max-frames {args.max_frames}: every "
+              f"{-(-stored // args.max_frames)}th is used, with the first, the last and the events "
+              "(--max-frames 0 animates all)", file=sys.stderr)
     if out.suffix.lower() == ".gif":
         played = 100.0 / gif_centiseconds(args.fps)
         if abs(played - args.fps) > 0.01 * args.fps:
@@ -353,7 +363,19 @@ def frame_steps(fields, curve, unload_only: bool = True) -> list[int]:
     return ([load[-1]] if load else []) + unload
 
 
+def thin_frames(steps: list[int], max_frames: int, keep=()) -> list[int]:
+    """Every k-th of ``steps`` (k the smallest that leaves at most ``max_frames``), with
+    the first, the last and those in ``keep`` (the events); all if ``max_frames`` is 0.
+    A GIF of 1257 frames took four minutes and 900 MB of memory (a user's hunt)."""
+    if not max_frames or len(steps) <= max_frames:
+        return steps
+    k = -(-len(steps) // max_frames)
+    keep = set(keep)
+    return [s for i, s in enumerate(steps) if i % k == 0 or i == len(steps) - 1 or s in keep]
+
+
 ANIMATION_SUFFIXES = (".gif", ".mp4")
+DEFAULT_MAX_FRAMES = 300        # 30 s at the default 10 fps
 # 10 cs a frame: a GIF plays it exactly (the former 8 fps played at 8.33, with a note on
 # every default run)
 DEFAULT_FPS = 10.0
@@ -364,6 +386,14 @@ DEFAULT_FPS = 10.0
 # frame) nothing is an animation.
 GIF_MAX_FPS = 50.0
 MIN_FPS = 0.01
+
+
+def check_max_frames(max_frames) -> None:
+    if isinstance(max_frames, bool) or not isinstance(max_frames, int) or max_frames < 0:
+        raise ViewError(f"--max-frames: a whole number of frames >= 0 (0: every stored snapshot), got {max_frames!r}")
+    if max_frames == 1:
+        raise ViewError("--max-frames: 1 frame is no animation; give 2 or more (0: every stored snapshot), "
+                        "or draw one step with tfm show")
 
 
 def check_fps(fps: float, out) -> None:
@@ -377,14 +407,17 @@ def check_fps(fps: float, out) -> None:
         raise ViewError(f"--fps {fps:g}: expected {allowed}{faster}")
 
 
-def animate(fields, curve, params, out, fps: float = DEFAULT_FPS, unload_only: bool = True, dpi: int = 110) -> int:
-    """Write a GIF (Pillow) or MP4 (ffmpeg) of the stored snapshots; returns the frame count."""
+def animate(fields, curve, params, out, fps: float = DEFAULT_FPS, unload_only: bool = True, dpi: int = 110,
+            max_frames: int = 0) -> int:
+    """Write a GIF (Pillow) or MP4 (ffmpeg) of the stored snapshots; returns the frame
+    count. ``max_frames`` > 0: at most about that many (thin_frames)."""
     import shutil
 
     out = Path(out)
     if out.suffix.lower() not in ANIMATION_SUFFIXES:
         raise ViewError(f"-o {out}: the animation is written as .gif or .mp4")
     check_fps(fps, out)
+    check_max_frames(max_frames)
     if out.suffix.lower() == ".mp4" and shutil.which("ffmpeg") is None:
         raise ViewError("MP4 needs ffmpeg on the PATH; write a .gif instead (-o anim.gif)")
     steps = frame_steps(fields, curve, unload_only)
@@ -396,6 +429,8 @@ def animate(fields, curve, params, out, fps: float = DEFAULT_FPS, unload_only: b
         why = snapshots_cut_short(fields) or "the run stored none while unloading"
         raise ViewError(f"{fields.path}: no unloading snapshot to animate: {why}; --all-phases animates "
                         "the loading snapshots")
+    from .snapshots import EVENTS
+    steps = thin_frames(steps, max_frames, keep=(fields.event_step(e) for e in EVENTS))
     from .results import through_temporary
 
     # through a temporary file beside it: a failed write leaves an earlier animation whole
