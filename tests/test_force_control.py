@@ -240,3 +240,28 @@ def test_the_run_header_counts_the_flats_moves_under_force_control(capsys, tmp_p
     moves = int(np.ceil(p.delta_max / 1e-3 - 1e-9))
     assert moves > 10                                   # the Hertz depth of 0.01, in steps of 1e-3
     assert f"(100 load levels; the flat moves at most step=0.001 a solve: {moves:,} or more solves" in header
+
+
+def test_a_small_preload_with_strong_adhesion_unloads_to_its_jump_off():
+    """100 load levels to 1e-3, then steps of 1e-5 into tension: the pull-off (0.053 under
+    displacement control) lies 5,300 unloading steps away, and the default cap of
+    20 x 100 + 1000 stopped the run short of it, flagged, with NaN (a user's hunt).
+    The cap now adds twice the continuum (JKR) pull-off in load steps."""
+    from tfm.protocol import default_max_unload_steps
+
+    body = dict(spacing=1 / 32, shape="paraboloid", k_th=0.3, step=1e-3)
+    res = tfm.simulate(control="force", max_load=1e-3, **body)
+    s = res.summary
+    assert s["unload_complete"] and not s["warnings"]
+    disp = tfm.simulate(max_indent=res.params.delta_max, **body).summary
+    # as in test_jump_off_is_the_displacement_controlled_pull_off: within 1 %, and above
+    assert disp["pull_off_force"] <= s["jump_off_force"] <= 1.01 * disp["pull_off_force"]
+    p = res.params
+    assert default_max_unload_steps(p) > s["n_steps"] > 20 * 100 + 1000
+    assert default_max_unload_steps(Params.from_dict(dict(body, max_indent=0.01))) == 20 * 10 + 1000
+    # a run that does hit the cap says what to raise
+    with pytest.warns(tfm.RunWarning, match="raise max_unload_steps, or load_step"):
+        short = tfm.simulate(control="force", max_load=1e-3, max_unload_steps=50, **body).summary
+    assert not short["unload_complete"]
+    assert ("unloading stopped at max_unload_steps with springs still in contact (after 50 unloading steps): "
+            "raise max_unload_steps, or load_step") in short["warnings"]

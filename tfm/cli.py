@@ -40,7 +40,8 @@ PARAM_HELP = {
     "tol": "relative residual of the contact solve",
     "max_iter": "CG iterations per solve (hitting it is flagged)",
     "max_rounds": "snap/enter rounds per step (hitting it is flagged)",
-    "max_unload_steps": "cap on unloading steps (default 20 x loading steps + 1000)",
+    "max_unload_steps": "cap on unloading steps (default 20 x loading steps + 1000; under force control plus twice the "
+                        "continuum pull-off force in load steps)",
     "preconditioner": "auto | fft | stencil | diagonal | none",
     "extent": "grid half-width (default: from the Hertz radius at max_indent)",
     "extent_margin": "auto extent = margin * the Hertz radius sqrt(R max_indent) + 4 spacings (sqrt(2 R "

@@ -133,7 +133,7 @@ class Params:
     tol: float = 1e-10                  # relative residual of the contact solve
     max_iter: int = 2000                # CG iterations per solve
     max_rounds: int = 10000             # snap/enter rounds per step
-    max_unload_steps: int | None = None  # None: 20 * loading steps + 1000
+    max_unload_steps: int | None = None  # None: tfm.protocol.default_max_unload_steps
     preconditioner: str = "auto"
     # grid extent (half-width of the square region holding the springs); None = auto
     extent: float | None = None

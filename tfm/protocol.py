@@ -33,7 +33,7 @@ import numpy as np
 
 from .checkpoint import DONE, StopRequest
 from .progress import say
-from .params import MAX_STEPS
+from .params import MAX_CAP, MAX_STEPS
 from .solver import ContactState, CurveResult, Problem, StepRecord
 
 # Bisections of the last load step before the jump-off: resolution load_step / 2**10.
@@ -50,7 +50,7 @@ def run(p, prob: Problem, observe: Observer | None = None, checkpoint=None) -> C
     tfm.checkpoint.Checkpoint, displacement control only) saves the state as the curve goes
     and continues from a saved state."""
     n_load = n_loading_steps(p)
-    max_unload = p.max_unload_steps or (20 * n_load + 1000)
+    max_unload = p.max_unload_steps or default_max_unload_steps(p)
     if checkpoint is not None and p.control == "force":
         raise ValueError("checkpoint: force control is not checkpointed")
     # SIGINT and SIGTERM wait for the end of the step in progress, where a checkpointed run
@@ -74,6 +74,21 @@ def run(p, prob: Problem, observe: Observer | None = None, checkpoint=None) -> C
         if stop.pending and checkpoint is None:
             stop.deliver()
     return out
+
+
+def default_max_unload_steps(p) -> int:
+    """``max_unload_steps=None``: 20 times the loading steps + 1000; under force control
+    also twice the continuum pull-off force in load steps (theory.pull_off_estimate). A
+    small preload with strong adhesion needs many more load steps to break than it took
+    to load: 100 load levels to 1e-3 then needed some 5,300 steps of 1e-5 to its pull-off
+    of 0.053 (spacing 1/32, k_th 0.3), and stopped at the former cap of 3,000, flagged."""
+    cap = 20 * n_loading_steps(p) + 1000
+    if p.control == "force":
+        from .theory import pull_off_estimate
+        from .units import force_scale          # theory is in paper units (SI: L* = 1 m)
+        tension = pull_off_estimate(p) * force_scale(p)
+        cap += math.ceil(min(2.0 * tension / p.load_decrement, MAX_CAP))
+    return int(min(cap, MAX_CAP))
 
 
 def n_loading_steps(p) -> int:

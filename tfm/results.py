@@ -318,7 +318,11 @@ def summarize(curve, out, p: Params, n_springs: int, grid_side: int | None) -> d
                         "moved twice the Hertz depth of the peak load without reaching it (a contact softer than "
                         "Hertz's?); the curve's largest load is max_force")
     if not out.unload_complete:
-        warnings.append("unloading stopped at max_unload_steps with springs still in contact")
+        from .protocol import default_max_unload_steps
+        cap = p.max_unload_steps or default_max_unload_steps(p)
+        warnings.append(f"unloading stopped at max_unload_steps with springs still in contact (after {cap:,} "
+                        "unloading steps): raise max_unload_steps"
+                        + (", or load_step" if p.control == "force" else ", or step"))
     from .guards import contact_reached_note
     few = contact_reached_note(p, int(col["n_contact"].max()) if n else 0)
     if few:

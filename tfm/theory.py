@@ -151,6 +151,25 @@ def run_critical_radius(p) -> float:
     return jkr_critical_radius(threshold_stress(p) * math.sqrt(p.spacing), p.radius)
 
 
+def pull_off_estimate(p) -> float:
+    """The continuum pull-off force of a run's body and threshold (paper units), the most
+    tension a contact can take under force control, whatever the preload: JKR for a sphere
+    (the Boussinesq kernel), Kendall for a flat punch of the run's radius, the Winkler
+    foundation's for the local and neighbour kernels. A smaller preload leaves a smaller
+    contact, which breaks earlier; the model's own coefficient is above JKR's by up to
+    some 25 % at coarse resolution (README, "What pull-off to expect in SI")."""
+    sigma = threshold_stress(p)
+    if p.kernel == "local":
+        return winkler_pull_off(p.c_w, sigma, p.radius)
+    if p.kernel == "neighbors":
+        c_w = neighbors_foundation_compliance(p.neighbor_rings, p.self_term, p.spacing)
+        return winkler_pull_off(c_w, sigma, p.radius)
+    k_ic = sigma * math.sqrt(p.spacing)
+    if p.shape == "flat_punch":
+        return float(kendall_force(p.radius, gamma_from_k(k_ic)))
+    return jkr_pull_off(k_ic, p.radius)
+
+
 AUTO_PRELOAD_CAP = 0.5      # times R: never as deep as the sphere itself
 
 
