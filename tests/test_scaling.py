@@ -370,7 +370,7 @@ def test_local_kernel_alpha_1_converges_to_winkler_limit():
     # 0.4-0.6 spacing/rho. Bound: 0 < excess < 0.6 spacing/rho, and it must shrink by
     # at least 2x per halving (convergence towards the exact limit). The bound holds for
     # these steps only: the maximum is sampled at the steps, and at 1/32 steps 25x finer
-    # gave +11.9 %, at 1/64 coarser ones -0.6 % (docs/physics.md, section 6).
+    # gave +12.7 %, at 1/64 10 steps -0.4 % (docs/physics.md, section 6).
     rho = math.sqrt(2.0 * 0.02)
     assert 0.0 < e64 < 0.6 * (1 / 64) / rho
     assert 0.0 < e32 < 0.6 * (1 / 32) / rho
