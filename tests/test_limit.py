@@ -90,6 +90,20 @@ def test_bad_input_is_refused(x, y, match):
 def test_p_bounds_are_checked():
     with pytest.raises(ValueError, match="p_bounds"):
         fit_limit(X, Y_INF + C * X ** -P, p_bounds=(0.0, 1.0))
+    # an infinite bound reached SciPy's "Optimization bounds must be finite scalars"
+    with pytest.raises(ValueError, match=r"fit_limit: p_bounds must satisfy 0 < low < high < inf"):
+        fit_limit(X, Y_INF + C * X ** -P, p_bounds=(0.1, np.inf))
+
+
+def test_text_says_when_the_interval_rests_on_the_p_search_bound():
+    """Convergence slower than the slowest p searched: the y_inf interval excludes the truth
+    (2.770 [2.763, 2.860] for 2 + x^-0.01) and text() said nothing of it (a user's hunt)."""
+    x = np.array([8, 16, 32, 64, 128, 256.0])
+    slow = fit_limit(x, 2.0 + x ** -0.01)
+    assert slow.p_open[0] and not slow.contains(2.0)
+    assert slow.text() == f"{slow.interval_text()} (if p ≥ 0.05: p {slow.p_text()})"
+    fast = fit_limit(X, Y_INF + C * X ** -P)
+    assert not any(fast.p_open) and fast.text() == fast.interval_text()
     assert LIMIT_P_BOUNDS[0] > 0
 
 

@@ -456,6 +456,17 @@ class LimitFit:
         return lo, hi
 
     def text(self, digits: int = 3) -> str:
+        """y_inf [low, high]; when the p interval reaches a search bound, the y_inf interval
+        holds only for p within the bounds, and says so (2 + x^-0.01 gave '2.770 [2.763,
+        2.860]' without a word, the true 2 outside it)."""
+        out = self.interval_text(digits)
+        lo, hi = self.p_open
+        if lo or hi:
+            out += f" (if p {'≥' if lo else '≤'} {self.p_bounds[0 if lo else 1]:g}: p {self.p_text()})"
+        return out
+
+    def interval_text(self, digits: int = 3) -> str:
+        """y_inf [low, high] alone, for a table whose p column says the rest (p_text)."""
         return f"{self.y_inf:.{digits}f} [{self.y_inf_low:.{digits}f}, {self.y_inf_high:.{digits}f}]"
 
     def p_text(self, digits: int = 2) -> str:
@@ -500,8 +511,8 @@ def fit_limit(x, y, confidence: float = CONFIDENCE, p_bounds: tuple[float, float
     if np.unique(x).size < 3:
         raise ValueError("fit_limit: need at least three distinct x")
     lo, hi = p_bounds
-    if not 0 < lo < hi:
-        raise ValueError(f"fit_limit: p_bounds must satisfy 0 < low < high, got {p_bounds}")
+    if not 0 < lo < hi < math.inf:         # an infinite bound reached SciPy's own error
+        raise ValueError(f"fit_limit: p_bounds must satisfy 0 < low < high < inf, got {p_bounds}")
     p = np.geomspace(lo, hi, LIMIT_P_GRID)
     z = x[None, :] ** -p[:, None]                       # (grid, n)
     s0, s1 = float(n), z.sum(axis=1)

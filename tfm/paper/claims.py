@@ -156,7 +156,8 @@ def claims_fig3(run) -> Finding:
         Claim("Fig. 3", "contact area constant until the first snap", "yes",
               f"{const_area} ({first} unloading steps at {n0} springs)", _yes(const_area)),
         Claim("Fig. 3", "the force turns tensile before the first snap", "yes",
-              f"most tensile force before the first snap: {tensile_before:.3g}", _yes(tensile_before < 0)),
+              # F is compression > 0: a positive minimum never turned tensile (it read as a tension)
+              f"smallest force before the first snap: F = {tensile_before:.3g} (tension < 0)", _yes(tensile_before < 0)),
         Claim("Fig. 3", "force and contact area drop to zero from a finite value", "yes",
               f"last step in contact: F = {last_force:.3g}, a = {last_radius:.3g}",
               _yes(last_force < 0 and last_radius > 0)),

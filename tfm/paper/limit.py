@@ -465,7 +465,7 @@ def summary_table(results: list[LimitResult]) -> pd.DataFrame:
         rows.append({
             "geometry": r.geometry, "self term": f"{r.self_term:g}", "points": len(r.points),
             "largest a/Δ": f"{r.largest_ratio:.0f}",
-            "fit y∞ (95 %)": f.text(3) if f else "—",
+            "fit y∞ (95 %)": f.interval_text(3) if f else "—",     # p_text beside it
             "fit p (95 %)": f.p_text(2) if f else "—",
             "plateau (95 %)": (f"{r.level.mean:.3f} [{r.level.ci_low:.3f}, {r.level.ci_high:.3f}] "
                                f"(a/Δ {r.level.x_low:.0f}–{r.level.x_high:.0f}" + _plateau_doubt(r.level)
