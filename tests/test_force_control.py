@@ -234,7 +234,15 @@ def test_the_run_header_counts_the_flats_moves_under_force_control(capsys, tmp_p
     argv = ["run", "--spacing", "1/32", "--shape", "paraboloid", "--k-th", "0.02", "--control", "force",
             "--max-load", "0.01", "--step", "1e-3", "--no-plot", "-o", str(tmp_path / "x.parquet")]
     assert main(argv) == 0
-    header = next(line for line in capsys.readouterr().err.splitlines() if line.startswith("tfm run "))
+    captured = capsys.readouterr()
+    header = next(line for line in captured.err.splitlines() if line.startswith("tfm run "))
+    # the printed summary has the jump-off's force, indent and radius (the indent was left out)
+    import json
+    printed = json.loads(captured.out)
+    assert {"jump_off_force", "jump_off_indent", "jump_off_contact_radius"} <= set(printed)
+    from tfm.results import read_metadata
+    stored = read_metadata(tmp_path / "x.parquet")["summary"]
+    assert printed["jump_off_indent"] == stored["jump_off_indent"] > 0
     p = Params.from_dict(dict(spacing="1/32", shape="paraboloid", k_th=0.02, control="force", max_load=0.01,
                               step=1e-3))
     moves = int(np.ceil(p.delta_max / 1e-3 - 1e-9))

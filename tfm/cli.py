@@ -355,7 +355,7 @@ def cmd_run(args) -> int:
                 plot_path, figure_lost = None, True
     s = res.summary
     if not args.quiet:
-        jump = ("jump_off_force", "jump_off_contact_radius") if p.control == "force" else ()
+        jump = ("jump_off_force", "jump_off_indent", "jump_off_contact_radius") if p.control == "force" else ()
         shown = {k: s[k] for k in ("pull_off_force", "pull_off_indent", "max_indent", "max_contact_radius",
                                    *jump, "n_steps", "n_solves", "solver_iters", "wall_time", "force_unit",
                                    "length_unit")}
