@@ -100,6 +100,21 @@ def test_xarray_opens_the_file_in_one_line(every10):
     ds.close()
 
 
+def test_xarray_gives_the_springs_of_an_irregular_layout_their_coordinates(tmp_path):
+    """On a hexagonal or jittered layout x and y were data variables beside a 'spring' axis
+    without coordinates, so a field carried no positions (a user's hunt)."""
+    xr = pytest.importorskip("xarray")
+    res = tfm.simulate(spacing=1 / 16, step=5e-3, snapshots="events", layout="hexagonal", operator="tree",
+                       fields_path=tmp_path / "h.fields.nc", **STANDARD)
+    with xr.open_dataset(tmp_path / "h.fields.nc") as ds:
+        F = ds["F"].sel(step=ds["step"].values[0])
+        assert F.dims == ("spring",) and {"x", "y"} <= set(F.coords)
+        fields = Fields(tmp_path / "h.fields.nc")
+        np.testing.assert_array_equal(F["x"].values, fields.x)
+        np.testing.assert_array_equal(F["y"].values, fields.y)
+    assert res.summary["unload_complete"]
+
+
 def test_write_curve_moves_the_fields_beside_the_table(tmp_path):
     res = tfm.simulate(spacing=1 / 16, step=2e-3, snapshots="events", **STANDARD)
     tmp = res.fields_path

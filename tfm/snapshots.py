@@ -240,6 +240,11 @@ class SnapshotWriter:
         v = self._var("state", ("step",) + space, None, "contact state", "1", dtype="i1", **comp)
         v.attrs["flag_values"] = np.array([STATE_NEVER, STATE_CONTACT, STATE_RELEASED], dtype=np.int8)
         v.attrs["flag_meanings"] = "never_in_contact in_contact released"
+        if self.grid is None:
+            # CF auxiliary coordinates: xarray then gives each spring field its x and y
+            # (they were plain data variables beside a 'spring' axis with no coordinate)
+            for name in ("x0", "f_th", "area", "F", "u", "state"):
+                f.variables[name].attrs["coordinates"] = "x y"
 
     # ---- writing -----------------------------------------------------------
     def _shape(self, a):
