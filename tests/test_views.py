@@ -887,6 +887,12 @@ def test_a_caption_names_the_settings_that_moved_the_numbers():
     moved = plots.run_caption(tfm.Params.from_dict(dict(base, self_term=3.0, snap_rule="single")))
     assert moved == plain + ", self_term = 3, snap_rule = single"
     assert "jitter" not in plots.run_caption(tfm.Params.from_dict(dict(base, layout="hexagonal", operator="tree")))
+    # a jittered layout's positions are its jitter and seed: named even at their defaults,
+    # or two different layouts had the same caption (a user's hunt)
+    jittered = dict(base, layout="jittered", operator="tree")
+    assert "jittered layout (jitter 0.25, seed 0)" in plots.run_caption(tfm.Params.from_dict(jittered))
+    assert "jittered layout (jitter 0.1, seed 7)" in plots.run_caption(
+        tfm.Params.from_dict(dict(jittered, jitter=0.1, seed=7)))
 
 
 def test_a_gif_s_frame_time_is_the_nearest_it_can_store_and_a_rate_it_cannot_is_said(stored_run, tmp_path, capsys):

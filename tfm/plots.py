@@ -190,7 +190,9 @@ def run_caption(p) -> str:
         parts.append(f"$\\delta_{{max}}$ = {number(p.delta_max)}{m}, step {number(p.step)}{m}")
     if p.kernel != "boussinesq":
         parts.append(f"{p.kernel} kernel")
-    if p.layout != "square":
+    if p.layout == "jittered":           # the positions: said even at their defaults
+        parts.append(f"jittered layout (jitter {p.jitter:g}, seed {p.seed})")
+    elif p.layout != "square":
         parts.append(f"{p.layout} layout")
     if p.operator != "fft":
         parts.append(f"{p.operator} operator" + (f" ($\\theta$ = {p.theta:g})" if p.operator == "tree" else ""))
@@ -204,7 +206,7 @@ def run_caption(p) -> str:
 # settings that change the numbers and are named above only when they are not the default
 # (a self term of 3 and the single snap rule drew the default run's caption, with a
 # pull-off 26 % lower)
-CAPTION_SETTINGS = ("self_term", "snap_rule", "c_w", "neighbor_rings", "jitter", "seed", "extent", "extent_margin",
+CAPTION_SETTINGS = ("self_term", "snap_rule", "c_w", "neighbor_rings", "extent", "extent_margin",
                     "short_cutoff", "long_cutoff", "rolloff", "load_step", "tol")
 
 
