@@ -1553,7 +1553,8 @@ def test_status_says_a_changed_height_map_left_the_tables_behind(tmp_path, capsy
     np.save(tmp_path / "bowl.npy", bowl)
     toml = tmp_path / "bowl.toml"
     toml.write_text(f'name = "bowl"\n[base]\nspacing = "1/32"\nshape = "height_map"\n'
-                    f'height_map = "{tmp_path / "bowl.npy"}"\nk_th = 0.02\nmax_indent = 0.05\nstep = 5e-3\n')
+                    f'height_map = "{tmp_path / "bowl.npy"}"\nmap_pixel_size = "1/32"\nk_th = 0.02\nmax_indent = 0.05\n'
+                    'step = 5e-3\n')
     run_campaign(toml, quiet=True, results_dir=tmp_path)
     np.save(tmp_path / "bowl.npy", 1.5 * bowl)                # another body, same file name
     capsys.readouterr()
