@@ -387,6 +387,9 @@ def test_list_does_not_count_another_files_runs_as_a_campaigns_own(tmp_path, cap
     a, b = capsys.readouterr().out.splitlines()
     assert a.split()[:5] == ["a", "2", "runs", "2", "done"]
     assert b.split()[:3] == ["b", "2", "runs"] and "holds another campaign file's results" in b and "done" not in b
+    # the folder follows the name inside the file, not the file's own name: both are said
+    # (the list named each by its file alone, a user's hunt)
+    assert f"(name 'same', results in {tmp_path / 'res' / 'same'})" in a
 
 
 # ---- failures ------------------------------------------------------------------

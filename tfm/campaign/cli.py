@@ -249,7 +249,9 @@ def cmd_list(args) -> int:
         else:
             st = store.status(spec)
             progress = f"{st.total:4d} runs {len(st.done):4d} done {len(st.failed):3d} failed"
-        line = f"{path.stem:{width}s} {progress}  " + " ".join(spec.description.split())
+        # the results folder follows the name inside the file, which may differ from the file's
+        named = f"(name {spec.name!r}, results in {store.root}) " if spec.name != path.stem else ""
+        line = f"{path.stem:{width}s} {progress}  {named}" + " ".join(spec.description.split())
         print(line if columns is None or len(line) <= columns else line[:columns - 3] + "...")
     return 2 if invalid else 0            # a script sees an invalid file (exit 0 hid it)
 
