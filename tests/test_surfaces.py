@@ -421,7 +421,7 @@ def test_threshold_forces_carry_the_disorder():
     with pytest.raises(ParameterError, match="threshold_disorder: unknown value"):
         Params(threshold_disorder="gauss", disorder_width=0.1)
     # no width given: said so ("must be in [0.015, 2] ... got 0.0" read as a bad zero)
-    with pytest.raises(ParameterError, match=r"disorder_width: required with threshold_disorder='weibull'"):
+    with pytest.raises(ParameterError, match=r"disorder_width: must be > 0 with threshold_disorder='weibull' .*it is 0, its default when not given"):
         Params(f_th=2e-4, threshold_disorder="weibull")
     assert Params.from_dict({"threshold_disorder": None}).threshold_disorder == "none"
 
@@ -776,3 +776,50 @@ def test_a_map_on_another_layout_gets_a_grid_it_covers(tmp_path, layout):
         step = p.spacing * (np.sqrt(3) / 2 if layout == "hexagonal" else 1.0)
         assert max(np.abs(lay.x).max(), np.abs(lay.y).max()) > reach - step - p.jitter * p.spacing - 1e-12
         assert np.isfinite(heights(p, lay)).all()
+
+
+# ---- messages that name the real cause (a user's hunt, 2026-11-25) --------------------
+SMOOTH = dict(shape="paraboloid", k_th=0.04, spacing="1/32", extent=0.75, max_indent=0.1, step=1e-3)
+
+
+@pytest.mark.parametrize("key, value", [("long_cutoff", 0.01), ("short_cutoff", 0.01), ("long_cutoff", 5.0)])
+def test_a_roughness_cutoff_on_a_smooth_surface_is_refused_as_having_no_effect(key, value):
+    """Its range was checked first: long_cutoff 0.01 was refused as "short_cutoff: must be <
+    long_cutoff", a parameter never given; fixing the range then met "has no effect"."""
+    with pytest.raises(ParameterError, match=rf"^{key}: {value!r} has no effect here; it applies only when the "
+                                             "surface is rough"):
+        Params.from_dict(dict(SMOOTH, **{key: value}))
+
+
+def test_height_maps_too_small_say_so_and_not_to_change_the_spacing(tmp_path):
+    from tfm.guards import check
+
+    np.save(tmp_path / "two.npy", np.zeros((2, 2)))
+    with pytest.raises(ParameterError, match=r"the map \(2 x 2 pixels\) has no pixel on both sides .* needs at "
+                                             r"least 3 x 3 pixels \(use a larger map\)$"):
+        Params.from_dict(dict(shape="height_map", height_map=str(tmp_path / "two.npy"), spacing="1/32", f_th=0,
+                              max_indent=0.01, step=5e-4))
+    np.save(tmp_path / "tiny.npy", np.zeros((3, 3)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")            # no map_pixel_size: warned, the point of this case
+        tiny = Params.from_dict(dict(shape="height_map", height_map=str(tmp_path / "tiny.npy"), spacing="1/32",
+                                     f_th=0, max_indent=0.01, step=5e-4, allow="coarse"))
+    (note,) = [n for n in check(tiny, memory=False) if n.startswith("allowed past the 'coarse' guard")]
+    assert "a finer spacing shrinks the map with it: use a larger map, or give map_pixel_size" in note
+    assert "Refine the spacing or preload deeper" not in note
+
+
+def test_a_square_map_on_a_jittered_layout_is_not_called_oblong(tmp_path):
+    from tfm.surfaces import map_unused_note
+
+    np.save(tmp_path / "map.npy", np.zeros((129, 129)))
+    base = dict(shape="height_map", height_map=str(tmp_path / "map.npy"), map_pixel_size="1/64", spacing="1/32",
+                f_th=0, max_indent=0.01, step=5e-4)
+    note = map_unused_note(Params.from_dict(dict(base, layout="jittered", operator="direct")))
+    assert note.startswith("height_map: the jittered layout's springs lie up to 0.9766 from the centre on a grid "
+                           "of half-width 0.9688 (jitter 0.25 spacings beyond it)")
+    assert "largest centred square" not in note
+    np.save(tmp_path / "oblong.npy", np.zeros((129, 65)))
+    oblong = map_unused_note(Params.from_dict(dict(base, height_map=str(tmp_path / "oblong.npy"), layout="jittered",
+                                                   operator="direct")))
+    assert "largest centred square" in oblong

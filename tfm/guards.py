@@ -125,6 +125,21 @@ def contact_radius_estimate(p) -> float:
     return math.sqrt(factor * p.radius * p.delta_max)
 
 
+def _coarse_remedy(p) -> str:
+    """What refines a run too coarse for its contact. A height map's contact is the map:
+    without its own pixel size the map's pixel is the spacing, and a finer spacing shrinks
+    the map with it (the advice to refine it could not help, a user's hunt)."""
+    if p.shape != "height_map":
+        return "Refine the spacing or preload deeper"
+    from .surfaces import load_height_map
+    hm = load_height_map(p.height_map)
+    nx, ny = hm.heights.shape
+    if p.map_pixel_size is None and hm.pixel_size is None:
+        return (f"The map has {nx} x {ny} pixels, each one spacing wide (no map_pixel_size given), so a finer "
+                "spacing shrinks the map with it: use a larger map, or give map_pixel_size and refine the spacing")
+    return f"Refine the spacing (the map has {nx} x {ny} pixels), or use a larger map"
+
+
 def n_springs(p) -> int:
     """Springs of the layout (the geometry's own counting, without building it)."""
     hw = p.half_width
@@ -398,7 +413,7 @@ def check(p, memory: bool = True) -> list[str]:
                           "contact radius at maximum "
                           f"load (a ~ {a:.3g}, spacing {p.spacing:.3g}); below "
                           f"{MIN_SPRINGS_ACROSS_RADIUS:g} the pull-off is erratic (errors of 50 to 170 %; "
-                          "one touching spring gives a pull-off of 0). Refine the spacing or preload deeper")
+                          "one touching spring gives a pull-off of 0). " + _coarse_remedy(p))
     elif _breaks_at_critical_radius(p):
         from .theory import run_critical_radius
         a_c = run_critical_radius(p)

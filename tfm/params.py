@@ -835,10 +835,12 @@ def _validate_surface(p: Params) -> None:
     for name in ("short_cutoff", "long_cutoff"):
         if getattr(p, name) is not None:
             _positive(name, getattr(p, name))
-    if p.short_cutoff is not None and p.short_cutoff < 2.0 * p.spacing * (1 - 1e-12):
+    # the ranges matter only on a rough surface: on a smooth one a cutoff has no effect and is
+    # refused as such (_check_applies); its range error first named a parameter never given
+    if rough and p.short_cutoff is not None and p.short_cutoff < 2.0 * p.spacing * (1 - 1e-12):
         raise ParameterError(f"short_cutoff: must be >= 2 spacings ({2 * p.spacing:g}, the shortest "
                              f"wavelength the grid carries), got {p.short_cutoff!r}")
-    if p.long_cutoff is not None:
+    if rough and p.long_cutoff is not None:
         short = p.short_cutoff if p.short_cutoff is not None else 4.0 * p.spacing
         if short >= p.long_cutoff:
             raise ParameterError(f"short_cutoff: must be < long_cutoff ({p.long_cutoff:g}), got {short!r}"
@@ -903,8 +905,8 @@ def _validate_surface(p: Params) -> None:
     w = _finite("disorder_width", p.disorder_width)
     if p.threshold_disorder != "none" and w == 0.0:
         # "must be in [0.015, 2] ... got 0.0" read as if a zero had been given
-        raise ParameterError(f"disorder_width: required with threshold_disorder={p.threshold_disorder!r}: the "
-                             "std/mean of the thresholds, e.g. 0.3")
+        raise ParameterError(f"disorder_width: must be > 0 with threshold_disorder={p.threshold_disorder!r} (the "
+                             "std/mean of the thresholds, e.g. 0.3); it is 0, its default when not given")
     if p.threshold_disorder == "uniform" and not 0.0 < w <= MAX_UNIFORM_WIDTH:
         raise ParameterError(f"disorder_width: must be in (0, {MAX_UNIFORM_WIDTH:.4f}] for 'uniform' "
                              f"(std/mean; 1/sqrt(3) keeps F_th >= 0), got {w!r}")
@@ -921,7 +923,7 @@ def _validate_surface_relations(p: Params) -> None:
     if _rough(p) and p.short_cutoff is not None and p.short_cutoff > side * (1 + 1e-12):
         raise ParameterError(f"short_cutoff: must be <= the grid side ({side:g}): no wavelength of the grid is "
                              f"longer than its side, so none would be left, got {p.short_cutoff!r}")
-    if p.long_cutoff is not None:
+    if _rough(p) and p.long_cutoff is not None:
         if p.long_cutoff > side * (1 + 1e-12):
             raise ParameterError(f"long_cutoff: must be <= the grid side ({side:g}); no wavevector of the "
                                  f"grid lies below a longer cutoff, got {p.long_cutoff!r}")
@@ -970,8 +972,14 @@ def _check_map_covers(p: Params) -> None:
         hm = load_height_map(p.height_map)
         avail = min(map_reach(p, hm))
         need = layout_reach(p, hw)
+        nx, ny = hm.heights.shape
+        if avail <= 0:
+            # a grid centred on a pixel needs one on each side of it: with 2 along a side the
+            # map reaches +-0, and no extent or spacing could help (the message said they might)
+            raise ParameterError(f"height_map: the map ({nx} x {ny} pixels) has no pixel on both sides of its "
+                                 "centre pixel along each axis, so it covers no grid beyond one spring; a map "
+                                 "needs at least 3 x 3 pixels (use a larger map)")
         if hw <= 0 or need > avail * (1 + 1e-9):
-            nx, ny = hm.heights.shape
             own = (f", the file's {hm.pixel_size:g} {hm.unit or ''} converted to metres"
                    + (" (L* = 1 m in paper units)" if p.units == "paper" else "")
                    if hm.pixel_size is not None and p.map_pixel_size is None else "")

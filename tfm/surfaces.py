@@ -512,6 +512,14 @@ def map_unused_note(p) -> str | None:
     reach_x, reach_y = map_reach(p, hm)
     hw = p.half_width
     if max(reach_x, reach_y) - hw >= p.spacing * (1 - 1e-9):
+        if p.layout != "square" and abs(reach_x - reach_y) < 1e-9 * p.spacing + 1e-12:
+            # a square map: what is left unused is the layout's margin, not an oblong's strip
+            from .geometry import layout_reach
+            return (f"height_map: the {p.layout} layout's springs lie up to {layout_reach(p, hw):.4g} from the "
+                    f"centre on a grid of half-width {hw:.4g}"
+                    + (f" (jitter {p.jitter:g} spacings beyond it)" if p.layout == "jittered" else "")
+                    + f", so the grid is kept that far inside the map, which reaches ±{reach_x:.4g}: its pixels "
+                    "beyond are not used")
         return (f"height_map: the grid is the map's largest centred square (half-width {hw:.4g}); the map "
                 f"({nx} x {ny} pixels) reaches ±{reach_x:.4g} along x and ±{reach_y:.4g} along y, and its "
                 "pixels beyond the square are not used")
