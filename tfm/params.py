@@ -976,9 +976,10 @@ def _check_map_covers(p: Params) -> None:
         if avail <= 0:
             # a grid centred on a pixel needs one on each side of it: with 2 along a side the
             # map reaches +-0, and no extent or spacing could help (the message said they might)
-            raise ParameterError(f"height_map: the map ({nx} x {ny} pixels) has no pixel on both sides of its "
-                                 "centre pixel along each axis, so it covers no grid beyond one spring; a map "
-                                 "needs at least 3 x 3 pixels (use a larger map)")
+            short = " and ".join(axis for axis, n in (("x", nx), ("y", ny)) if n < 3) or "x or y"
+            raise ParameterError(f"height_map: the map ({nx} x {ny} pixels) has fewer than 3 pixels along {short}: "
+                                 "the grid is centred on a pixel and needs one on each side of it, so no grid "
+                                 "beyond one spring fits; a map needs at least 3 x 3 pixels (use a larger map)")
         if hw <= 0 or need > avail * (1 + 1e-9):
             own = (f", the file's {hm.pixel_size:g} {hm.unit or ''} converted to metres"
                    + (" (L* = 1 m in paper units)" if p.units == "paper" else "")
