@@ -370,6 +370,8 @@ def test_snapshot_files_are_sized_before_the_run(tmp_path, capsys):
     big = p.replace(spacing=1 / 1024, step=2.5e-4)   # 366,025 springs, 200 loading steps
     assert re.search(r"every step of 366,025 springs: at least 401 snapshots .* 0\.82-2\.3 GiB", size_note(big))
     assert size_note(big.replace(snapshots=10)) is None
+    assert re.search(r"^snapshots: every 2nd step of 366,025 springs: at least 201 snapshots",
+                     size_note(big.replace(snapshots=2)))
     assert size_note(p, folder=tmp_path) is None
     assert main(["run", "--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.05",
                  "--step", "1e-3", "--snapshots", "10000", "-q", "-o", str(tmp_path / "k.parquet")]) == 0

@@ -115,6 +115,14 @@ BYTES_PER_SPRING_RAW, BYTES_PER_SPRING_PACKED = 17.0, 6.0
 LARGE_SNAPSHOTS = 2**30        # estimates above this are said before the run
 
 
+def every(k: int, what: str = "step") -> str:
+    """'every step', 'every 2nd step', 'every 23rd step', 'every 11th step'."""
+    if k == 1:
+        return f"every {what}"
+    suffix = "th" if 10 <= k % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
+    return f"every {k}{suffix} {what}"
+
+
 def size_note(p, folder: str | os.PathLike | None = None) -> str | None:
     """What to say before a run with ``snapshots = k`` (None: nothing): the files' size
     when it may be large, or exceed the free disk of the temporary folder they are written
@@ -128,7 +136,7 @@ def size_note(p, folder: str | os.PathLike | None = None) -> str | None:
         return None
     k, loading = p.snapshots, n_loading_steps(p)
     if k > 2 * loading:
-        return (f"snapshots: every {k}th step, but the loading has {loading} steps (the unloading usually "
+        return (f"snapshots: {every(k)}, but the loading has {loading} steps (the unloading usually "
                 "1-2 times as many): few steps besides step 0 and the events (snapshots='events') will be stored")
     count = 2 * loading // k + 1          # at least: the unloading as long as the loading
     n = n_springs(p)
@@ -140,7 +148,7 @@ def size_note(p, folder: str | os.PathLike | None = None) -> str | None:
     if high < LARGE_SNAPSHOTS and (free is None or high < free / 2):
         return None
     room = "" if free is None else f"; {free / 2**30:.1f} GiB free in {folder or tempfile.gettempdir()}, where they are written first"
-    return (f"snapshots: every {f'{k}th ' if k > 1 else ''}step of {n:,} springs: at least {count:,} snapshots "
+    return (f"snapshots: {every(k)} of {n:,} springs: at least {count:,} snapshots "
             f"(the unloading as long as the loading), {low / 2**30:.2g}-{high / 2**30:.2g} GiB "
             f"(compressed, and not){room}. A larger k, or snapshots='events', keeps the files small; "
             "the snapshots stop, keeping the curve, if the disk fills")

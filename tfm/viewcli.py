@@ -337,9 +337,10 @@ def _animate(args) -> Path:
                 max_frames=args.max_frames)
     stored = len(frame_steps(fields, curve, not args.all_phases))
     if n < stored:
-        print(f"tfm: note: {stored} snapshots to animate, more than --max-frames {args.max_frames}: every "
-              f"{-(-stored // args.max_frames)}th is used, with the first, the last and the events "
-              "(--max-frames 0 animates all)", file=sys.stderr)
+        from .snapshots import every
+        print(f"tfm: note: {stored} snapshots to animate, more than --max-frames {args.max_frames}: "
+              f"{every(frame_stride(stored, args.max_frames), 'one')} is used, with the first, the last and the "
+              "events (--max-frames 0 animates all)", file=sys.stderr)
     if out.suffix.lower() == ".gif":
         played = 100.0 / gif_centiseconds(args.fps)
         if abs(played - args.fps) > 0.01 * args.fps:
@@ -363,13 +364,18 @@ def frame_steps(fields, curve, unload_only: bool = True) -> list[int]:
     return ([load[-1]] if load else []) + unload
 
 
+def frame_stride(n: int, max_frames: int) -> int:
+    """The smallest k for which every k-th of ``n`` snapshots makes at most ``max_frames``."""
+    return -(-n // max_frames)
+
+
 def thin_frames(steps: list[int], max_frames: int, keep=()) -> list[int]:
     """Every k-th of ``steps`` (k the smallest that leaves at most ``max_frames``), with
     the first, the last and those in ``keep`` (the events); all if ``max_frames`` is 0.
     A GIF of 1257 frames took four minutes and 900 MB of memory (a user's hunt)."""
     if not max_frames or len(steps) <= max_frames:
         return steps
-    k = -(-len(steps) // max_frames)
+    k = frame_stride(len(steps), max_frames)
     keep = set(keep)
     return [s for i, s in enumerate(steps) if i % k == 0 or i == len(steps) - 1 or s in keep]
 
