@@ -407,6 +407,32 @@ def test_minus_zero_is_the_same_run_as_zero():
     assert math.copysign(1.0, Params.from_dict(dict(base, k_th=-0.0)).k_th) == 1.0
 
 
+def test_a_single_precision_value_is_the_run_of_the_number_it_prints():
+    """np.float32(0.1) as max_load made another run than 0.1: its float is
+    0.10000000149..., though it prints, and was meant, as 0.1 (a user's hunt)."""
+    import numpy as np
+
+    base = dict(spacing="1/16", shape="paraboloid", k_th=0.02, control="force", step=2e-3)
+    plain = Params.from_dict(dict(base, max_load=0.1))
+    single = Params.from_dict(dict(base, max_load=np.float32(0.1)))
+    assert single.max_load == 0.1 and type(single.max_load) is float
+    assert single.run_id == plain.run_id
+
+
+def test_clearing_a_parameter_when_it_stops_applying_is_no_warning():
+    """replace(control="displacement", max_load=None) on a force-controlled record warned
+    "max_load: given but has no effect": None clears it, back to its default."""
+    base = dict(spacing="1/16", shape="paraboloid", k_th=0.02, step=2e-3)
+    force = Params.from_dict(dict(base, control="force", max_load=0.01))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        back = force.replace(control="displacement", max_load=None)
+    assert back == Params.from_dict(dict(base, max_indent=back.max_indent))
+    # a value that has no effect is still refused, and a default given is still warned
+    with pytest.warns(ParameterWarning, match="max_load: given but has no effect"):
+        Params.from_dict(dict(base, max_load=None))
+
+
 def test_extent_auto_is_the_automatic_extent():
     """The README's table gives extent's default as auto, but 'auto' was refused as not a
     number (a user's hunt)."""

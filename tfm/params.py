@@ -81,7 +81,7 @@ def parse_number(value: Any, name: str) -> float:
     if isinstance(value, bool) or (type(value).__module__ == "numpy" and "bool" in type(value).__name__):
         raise ParameterError(f"{name}: expected a number, got a boolean {value!r}")
     if isinstance(value, numbers.Real):
-        return float(value)
+        return _plain_float(value)
     if isinstance(value, str):
         text = value.strip()
         match = _FRACTION.match(text)
@@ -96,6 +96,15 @@ def parse_number(value: Any, name: str) -> float:
         except ValueError:
             pass
     raise ParameterError(f"{name}: cannot read {value!r} as a number (use e.g. 0.5, 2e-5 or 1/64)")
+
+
+def _plain_float(value: numbers.Real) -> float:
+    """A Python float; a NumPy float of less than double precision as the number it
+    prints (np.float32(0.1) is 0.1 as meant, not 0.10000000149...: one run, not two)."""
+    dtype = getattr(value, "dtype", None)
+    if dtype is not None and dtype.kind == "f" and dtype.itemsize < 8:
+        return float(str(value))
+    return float(value)
 
 
 @dataclass(frozen=True)
@@ -363,7 +372,10 @@ class Params:
         The changes are advised on (``advise``) if this record was."""
         new = self._replaced(changes)
         if getattr(self, "_advised", False):
-            new.advise({key: getattr(new, key) for key in changes})
+            # None for an optional parameter clears it (max_load=None on leaving force
+            # control): a change back to its default is no parameter given
+            new.advise({key: getattr(new, key) for key in changes
+                        if not (changes[key] is None and _DEFAULTS[key] is None)})
         return new
 
     def _replaced(self, changes: Mapping[str, Any]) -> "Params":
@@ -430,7 +442,7 @@ def _normalize(p: Params) -> None:
             if kind == "float":
                 object.__setattr__(p, name, float(value))
         elif kind == "float" and isinstance(value, numbers.Real):
-            object.__setattr__(p, name, float(value) + 0.0)       # + 0.0: -0.0 -> 0.0
+            object.__setattr__(p, name, _plain_float(value) + 0.0)       # + 0.0: -0.0 -> 0.0
         elif kind == "int" and isinstance(value, numbers.Integral):
             object.__setattr__(p, name, int(value))
     if isinstance(p.allow, str):
