@@ -482,6 +482,23 @@ def test_a_renamed_table_finds_its_snapshots_when_its_old_name_holds_a_newer_run
     assert "stale, from an earlier run" in capsys.readouterr().err
 
 
+def test_a_renamed_table_finds_its_snapshots_when_its_old_name_holds_a_damaged_file(stored_run, tmp_path, capsys):
+    """Renamed with its snapshots (keep.parquet, keep.fields.nc) and the recorded name
+    (curve.fields.nc) left damaged: "not a readable field snapshots file" without trying
+    the table's own, good file. Alone, the damaged file is still named as such."""
+    import shutil
+
+    keep = tmp_path / "keep.parquet"
+    shutil.copy(stored_run, keep)
+    shutil.copy(stored_run.with_name("curve.fields.nc"), tmp_path / "keep.fields.nc")
+    (tmp_path / "curve.fields.nc").write_bytes(b"not a NetCDF file" * 64)
+    assert main(["show", str(keep), "--step", "pull_off", "-o", str(tmp_path / "k.png")]) == 0
+    (tmp_path / "keep.fields.nc").unlink()
+    capsys.readouterr()
+    assert main(["show", str(keep), "-o", str(tmp_path / "k2.png")]) == 2
+    assert "curve.fields.nc: not a readable field snapshots file" in capsys.readouterr().err
+
+
 def test_a_damaged_snapshot_or_an_output_that_cannot_be_replaced_is_one_line(stored_run, tmp_path, capsys):
     """A chunk of F damaged on disk gave h5py's OSError as a traceback; so did a figure that
     could not be replaced (read-only folder), after the drawing. Both are one line, exit 1,

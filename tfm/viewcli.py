@@ -183,13 +183,13 @@ def _need_fields(path, fields, params):
     # the recorded name first, then the table's own <stem>.fields.nc: a table renamed with
     # its snapshots, whose recorded name now holds a newer run's, was refused as stale
     own = fields_path_for(path)
-    stale = None
+    why = None
     for candidate in [fields] + ([own] if own != fields and own.exists() else []):
         try:
             out = Fields(candidate)
         except (OSError, KeyError) as exc:
-            if stale is None:
-                raise ViewError(f"{candidate}: not a readable field snapshots file ({exc})") from None
+            # a damaged file under the recorded name must not hide the table's own good one
+            why = why or f"{candidate}: not a readable field snapshots file ({exc})"
             continue
         theirs = out.attrs.get("run_id")
         theirs = theirs.decode() if isinstance(theirs, bytes) else theirs
@@ -197,11 +197,11 @@ def _need_fields(path, fields, params):
             if params is not None:
                 out.use_force_scale(force_scale(params))      # forces in the table's units (SI: N)
             return out
-        if stale is None:
+        if why is None:
             held = f"the snapshots of run {theirs}" if theirs else "snapshots of no recorded run"
-            stale = (f"{candidate} holds {held}, not of run {table_id or params.run_id} in {path}: "
-                     "stale, from an earlier run; rerun this one with snapshots on (--snapshots events or a step count)")
-    raise ViewError(stale)
+            why = (f"{candidate} holds {held}, not of run {table_id or params.run_id} in {path}: "
+                   "stale, from an earlier run; rerun this one with snapshots on (--snapshots events or a step count)")
+    raise ViewError(why)
 
 
 # why a run has no snapshot of an event (tfm.snapshots.SnapshotWriter.observe)
