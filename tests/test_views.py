@@ -359,26 +359,38 @@ def test_animate_makes_a_gif_with_one_frame_per_unloading_snapshot(stored_run, t
 
 
 def test_animate_thins_many_snapshots_to_max_frames_and_keeps_the_events(stored_run, tmp_path, capsys):
-    """1257 snapshots made a GIF of 1257 frames, in four minutes and 900 MB (a user's hunt)."""
+    """1257 snapshots made a GIF of 1257 frames, in four minutes and 900 MB (a user's hunt);
+    then --max-frames 10 made 13 frames and --max-frames 2 five: the first, the last and
+    the events came on top of the stride (another)."""
     from PIL import Image
 
     from tfm.snapshots import EVENTS, Fields
-    from tfm.viewcli import frame_steps, thin_frames
+    from tfm.viewcli import FRAME_EVENTS, event_steps, frame_plan, frame_steps
 
+    assert set(FRAME_EVENTS) == set(EVENTS)
     fields = Fields(stored_run.with_name("curve.fields.nc"))
     steps = frame_steps(fields, pd.read_parquet(stored_run))
-    events = {fields.event_step(e) for e in EVENTS} & set(steps)
-    assert len(steps) > 8 and events
-    thin = thin_frames(steps, 8, keep=events)
-    k = -(-len(steps) // 8)
-    # every k-th, the last, the events, and nothing else, in order
-    assert thin == [s for i, s in enumerate(steps) if i % k == 0 or i == len(steps) - 1 or s in events]
-    assert thin_frames(steps, 0) == steps == thin_frames(steps, len(steps))
+    events = [s for s in event_steps(fields) if s in steps]
+    assert len(steps) > 10 and len(events) >= 2
+    for cap in range(2, len(steps)):
+        thin, k = frame_plan(steps, cap, keep=event_steps(fields))
+        must = {steps[0], steps[-1], *events}
+        assert len(thin) <= cap and thin == sorted(set(thin)) and set(thin) <= set(steps)
+        if k:       # every k-th, the first, the last and the events, nothing else; k the smallest
+            assert thin == [s for i, s in enumerate(steps) if i % k == 0 or s in must]
+            assert k == 1 or len([s for i, s in enumerate(steps) if i % (k - 1) == 0 or s in must]) > cap
+        else:       # no room for a stride: the first, the last, then the events by priority
+            assert len(must) >= cap and thin[0] == steps[0] and thin[-1] == steps[-1]
+            assert len(thin) == cap and (cap < 3 or events[0] in thin)
+    assert frame_plan(steps, 0)[0] == steps == frame_plan(steps, len(steps))[0]
     out = tmp_path / "thin.gif"
-    assert main(["animate", str(stored_run), "-o", str(out), "--max-frames", "8"]) == 0
-    err = capsys.readouterr().err
-    assert f"{len(thin)} frames" in err and f"{len(steps)} snapshots to animate, more than --max-frames 8" in err
-    assert Image.open(out).n_frames == len(thin)
+    for cap in (8, 2):
+        thin, k = frame_plan(steps, cap, keep=event_steps(fields))
+        assert main(["animate", str(stored_run), "-o", str(out), "--max-frames", str(cap), "--overwrite"]) == 0
+        err = capsys.readouterr().err
+        assert f"{len(thin)} frames" in err and f"{len(steps)} snapshots to animate, more than --max-frames {cap}" in err
+        assert ("only the first, the last and the events" in err) == (k == 0)
+        assert Image.open(out).n_frames == len(thin) <= cap
     for bad in ("-1", "1"):
         assert main(["animate", str(stored_run), "-o", str(out), "--max-frames", bad, "--overwrite"]) == 2
         assert "--max-frames:" in capsys.readouterr().err

@@ -335,12 +335,14 @@ def _animate(args) -> Path:
     fields = _need_fields(path, fpath, params)
     n = animate(fields, curve, params, out, fps=args.fps, unload_only=not args.all_phases,
                 max_frames=args.max_frames)
-    stored = len(frame_steps(fields, curve, not args.all_phases))
-    if n < stored:
+    stored = frame_steps(fields, curve, not args.all_phases)
+    if n < len(stored):
         from .snapshots import every
-        print(f"tfm: note: {stored} snapshots to animate, more than --max-frames {args.max_frames}: "
-              f"{every(frame_stride(stored, args.max_frames), 'one')} is used, with the first, the last and the "
-              "events (--max-frames 0 animates all)", file=sys.stderr)
+        _, k = frame_plan(stored, args.max_frames, keep=event_steps(fields))
+        used = (f"{every(k, 'one')} is used, with the first, the last and the events" if k else
+                "only the first, the last and the events (as many as fit) are used")
+        print(f"tfm: note: {len(stored)} snapshots to animate, more than --max-frames {args.max_frames}: "
+              f"{used} (--max-frames 0 animates all)", file=sys.stderr)
     if out.suffix.lower() == ".gif":
         played = 100.0 / gif_centiseconds(args.fps)
         if abs(played - args.fps) > 0.01 * args.fps:
@@ -350,6 +352,16 @@ def _animate(args) -> Path:
         if params is not None and params.snapshots == "events" else ""
     print(f"{n} frames{events}", file=sys.stderr)
     return out
+
+
+# the events an animation keeps when thinned, most wanted first (tfm.snapshots.EVENTS)
+FRAME_EVENTS = ("pull_off", "first_snap", "last_contact", "max_load")
+
+
+def event_steps(fields) -> list[int]:
+    """The steps of the run's events that have a snapshot, in FRAME_EVENTS' order."""
+    steps = (fields.event_step(e) for e in FRAME_EVENTS)
+    return [s for s in steps if s is not None]
 
 
 def frame_steps(fields, curve, unload_only: bool = True) -> list[int]:
@@ -364,20 +376,28 @@ def frame_steps(fields, curve, unload_only: bool = True) -> list[int]:
     return ([load[-1]] if load else []) + unload
 
 
-def frame_stride(n: int, max_frames: int) -> int:
-    """The smallest k for which every k-th of ``n`` snapshots makes at most ``max_frames``."""
-    return -(-n // max_frames)
-
-
-def thin_frames(steps: list[int], max_frames: int, keep=()) -> list[int]:
-    """Every k-th of ``steps`` (k the smallest that leaves at most ``max_frames``), with
-    the first, the last and those in ``keep`` (the events); all if ``max_frames`` is 0.
-    A GIF of 1257 frames took four minutes and 900 MB of memory (a user's hunt)."""
-    if not max_frames or len(steps) <= max_frames:
-        return steps
-    k = frame_stride(len(steps), max_frames)
-    keep = set(keep)
-    return [s for i, s in enumerate(steps) if i % k == 0 or i == len(steps) - 1 or s in keep]
+def frame_plan(steps: list[int], max_frames: int, keep=()) -> tuple[list[int], int]:
+    """The frames of at most ``max_frames`` (all if 0) from ``steps``: the first, the
+    last, the events in ``keep`` (in their order of priority, as many as fit) and every
+    k-th step, k the smallest that stays within ``max_frames``; returns (frames, k), k = 0
+    when the first, the last and the events fill it. The events used to come on top: 13
+    frames for --max-frames 10 (a user's hunt). A GIF of 1257 frames took four minutes and
+    900 MB of memory (another)."""
+    n = len(steps)
+    if not max_frames or n <= max_frames:
+        return list(steps), 1
+    inside = set(steps)
+    must = list(dict.fromkeys([steps[0], steps[-1]] + [s for s in keep if s in inside]))
+    if len(must) >= max_frames:
+        chosen = set(must[:max_frames])
+        return [s for s in steps if s in chosen], 0
+    must = set(must)
+    k = -(-n // max_frames)
+    while True:                 # k = n leaves only the first, so this ends
+        frames = [s for i, s in enumerate(steps) if i % k == 0 or s in must]
+        if len(frames) <= max_frames:
+            return frames, k
+        k += 1
 
 
 ANIMATION_SUFFIXES = (".gif", ".mp4")
@@ -416,7 +436,7 @@ def check_fps(fps: float, out) -> None:
 def animate(fields, curve, params, out, fps: float = DEFAULT_FPS, unload_only: bool = True, dpi: int = 110,
             max_frames: int = 0) -> int:
     """Write a GIF (Pillow) or MP4 (ffmpeg) of the stored snapshots; returns the frame
-    count. ``max_frames`` > 0: at most about that many (thin_frames)."""
+    count. ``max_frames`` > 0: at most that many (frame_plan)."""
     import shutil
 
     out = Path(out)
@@ -435,8 +455,7 @@ def animate(fields, curve, params, out, fps: float = DEFAULT_FPS, unload_only: b
         why = snapshots_cut_short(fields) or "the run stored none while unloading"
         raise ViewError(f"{fields.path}: no unloading snapshot to animate: {why}; --all-phases animates "
                         "the loading snapshots")
-    from .snapshots import EVENTS
-    steps = thin_frames(steps, max_frames, keep=(fields.event_step(e) for e in EVENTS))
+    steps, _ = frame_plan(steps, max_frames, keep=event_steps(fields))
     from .results import through_temporary
 
     # through a temporary file beside it: a failed write leaves an earlier animation whole
