@@ -85,6 +85,24 @@ def test_every_parameter_has_a_flag_with_help():
     assert set(PARAM_HELP) == set(Params.field_names())
 
 
+def test_the_help_of_a_dimensioned_parameter_gives_its_unit(capsys):
+    """--spacing, --f-th, --max-load ... said nothing of L*, F*, metres or newtons."""
+    from tfm.units import COLUMN_UNITS
+
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    text = text[text.index("options:"):]
+    dims = COLUMN_UNITS["paper"]["parameters"]
+    for name, dim in dims.items():
+        flag = "--" + name.replace("_", "-")
+        after = text[text.index(flag + " VALUE") + len(flag):]
+        after = re.split(r" --[a-z-]+ VALUE", after)[0]          # up to the next flag's help
+        want = {"length": "[L*; m with --units si]", "force": "[F*; N with --units si]",
+                "k_th": "[F*/L*^(2 alpha)]"}[dim]
+        assert want in after, (flag, after)
+
+
 # ---- outputs are checked before any computation ------------------------------------
 SMALL = ["--spacing", "1/32", "--k-th", "0.02", "--shape", "paraboloid", "--max-indent", "0.02",
          "--step", "1e-3", "-q"]

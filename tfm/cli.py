@@ -18,7 +18,7 @@ from .viewcli import register as register_views
 
 PARAM_HELP = {
     "spacing": "spring spacing Delta, e.g. 1/128",
-    "alpha": "threshold exponent: F_th = k_th * A^alpha",
+    "alpha": "threshold exponent: F_th = k_th * A^alpha, in [-1, 3] (the paper: 0 to 1)",
     "k_th": "threshold parameter K_th (sets f_th to none)",
     "f_th": "explicit threshold force F_th",
     "radius": "radius R of the body",
@@ -74,10 +74,17 @@ PARAM_HELP = {
 
 def _add_param_flags(parser: argparse.ArgumentParser) -> None:
     """One flag per parameter, named like the field with dashes (--k-th, --max-indent)."""
-    for f in dataclasses.fields(Params):       # no Params(): --help must not load NumPy
+    from .units import COLUMN_UNITS
+
+    dims = COLUMN_UNITS["paper"]["parameters"]
+    unit = {"length": "L*; m with --units si", "force": "F*; N with --units si",
+            "k_th": COLUMN_UNITS["paper"]["k_th"]}
+    for f in dataclasses.fields(Params):       # no Params(): --help must not load Numba
         flag = "--" + f.name.replace("_", "-")
         default = f.default
         text = PARAM_HELP.get(f.name, "")
+        if f.name in dims:                     # the unit, from the one table of units
+            text += f" [{unit[dims[f.name]]}]"
         if "(default" not in text:            # a help text that says its default itself
             text += f" (default: {default!r})"
         parser.add_argument(flag, dest=f.name, default=None, metavar="VALUE", help=text)
