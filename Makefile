@@ -19,7 +19,7 @@ test-slow:          ## paper-scale regression tests (minutes to hours)
 
 run:                ## the main job on its embedded default: the paper's Fig. 3 case
 	mkdir -p results/default
-	tfm run --overwrite -o results/default/curve.parquet
+	$(PYTHON) -m tfm run --overwrite -o results/default/curve.parquet
 
 bench:              ## ratios against bench/baseline.py, before/after, operators, curves, tree (medians)
 	$(PYTHON) -m bench.run_bench $(BENCH_FLAGS)
@@ -34,12 +34,12 @@ validate:           ## tfm against ContactMechanics (non-adhesive rough contact)
 	$(PYTHON) -m bench.validate_contactmechanics
 
 rough:              ## the rough-sphere campaign, then its figure and table in results/rough/
-	tfm campaign run campaigns/rough_sphere.toml --jobs $(JOBS)
+	$(PYTHON) -m tfm campaign run campaigns/rough_sphere.toml --jobs $(JOBS)
 	$(PYTHON) -m bench.rough_report
 
 campaign:           ## run campaigns/$(NAME).toml, e.g. make campaign NAME=smoke JOBS=2
 	@test -n "$(NAME)" || (echo "usage: make campaign NAME=<file stem>; see make campaigns"; exit 2)
-	tfm campaign run campaigns/$(NAME).toml --jobs $(JOBS)
+	$(PYTHON) -m tfm campaign run campaigns/$(NAME).toml --jobs $(JOBS)
 
 campaigns:          ## list the campaign files
 	@for f in campaigns/*.toml; do echo "$$(basename $$f .toml)"; done

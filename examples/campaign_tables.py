@@ -46,7 +46,7 @@ def main(out: Path) -> None:
     con = duckdb.connect()
     query = f"""
         SELECT s.p_alpha AS alpha, s.p_radius AS radius, s.r_pull_off_force AS f_max,
-               count(*) AS n_steps, max(c.n_snapped) AS worst_snap_round, s.fields_path
+               count(*) AS n_steps, max(c.n_snapped) AS most_snaps_in_a_step, s.fields_path
         FROM read_parquet('{root / "summary.parquet"}') AS s
         JOIN read_parquet('{root / "curves.parquet"}') AS c USING (run_id)
         GROUP BY ALL ORDER BY alpha, radius
