@@ -78,7 +78,7 @@ def test_default_figure_renders_without_faults(case, tmp_path):
     assert fig.axes[0].get_legend() is not None and fig.axes[1].get_legend() is None
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     if case in ("sphere", "hexagonal"):
-        assert "Hertz (paraboloid approximation of the sphere)" in labels
+        assert "Hertz (paraboloid approx.)" in labels
     else:
         assert any("flat punch" in lab for lab in labels)
         # (b)'s dashed a = R line had no name at all (no legend there)
@@ -200,7 +200,27 @@ def test_captions_and_references_of_height_maps_rough_bodies_and_disorder(tmp_pa
     # the rough punch's line did not say it was the smooth punch's
     punch = tfm.Params.from_dict(dict(shape="flat_punch", radius=0.5, spacing=1 / 32, f_th=0, rms_slope=0.1,
                                       max_indent=0.012, step=1e-4))
-    assert plots.reference_label(punch) == "Boussinesq flat punch (smooth), $P = 2E^*R\\delta$"
+    assert plots.reference_label(punch) == "smooth punch, $P = 2E^*R\\delta$"
+    assert plots.reference_label(punch.replace(rms_slope=0)) == "Boussinesq flat punch, $P = 2E^*R\\delta$"
+
+
+def test_the_rough_punchs_figure_keeps_its_reference_within_the_runs_forces():
+    """The smooth punch's a(P) line ran to 4x the rough punch's largest force and squeezed
+    its curve into the left quarter of (b); the y label with its factor (x10^-3) ran past
+    the top of (a) into the panel letter (a user's hunt). The factor now sits beside the
+    unit and the note goes on a second line."""
+    p = tfm.Params.from_dict(dict(shape="flat_punch", radius=0.5, spacing=1 / 32, f_th=0, rms_slope=0.1,
+                                  short_cutoff=8 / 32, long_cutoff=0.5, max_indent=0.012, step=4e-4))
+    res = tfm.simulate(p)
+    fig = plots.plot_curve(res.curve, p)
+    plots.fold_offsets(fig)
+    ax1, ax2 = fig.axes[:2]
+    pmax = res.curve["force"].max()
+    # matplotlib's margins add 5 % of the data range on each side
+    assert ax2.get_xlim()[1] <= pmax * 1.06 + 1e-12
+    assert ax1.get_ylim()[1] > 2 * pmax         # (a) keeps the whole reference P(delta)
+    label = ax1.get_ylabel()
+    assert "\n(compression > 0)" in label and "10^{" in label.split("\n")[0]
 
 
 def test_jkr_scaling_axis_has_no_overlapping_ticks():
@@ -683,7 +703,7 @@ def test_the_fps_range_is_what_a_gif_can_store():
 # ---- contact maps: units, colour bar, contact line ----------------------------------------
 def _no_offset(label):
     """An axis label without the common factor that plots.fold_offsets adds on saving."""
-    return re.sub(r" \(\$\\times.*\)$", "", label)
+    return re.sub(r" \(\$\\times[^)]*\)", "", label).replace("\n", " ")     # a y label's note: 2nd line
 
 
 def test_a_common_factor_goes_into_its_axis_label(stored_run, tmp_path):
@@ -698,7 +718,9 @@ def test_a_common_factor_goes_into_its_axis_label(stored_run, tmp_path):
         for axis, label in ((ax.xaxis, ax.get_xlabel()), (ax.yaxis, ax.get_ylabel())):
             offset = axis.get_major_formatter().get_offset()
             if offset:
-                assert label.endswith(f"({offset})") and not axis.get_offset_text().get_visible()
+                # a y label's note goes on a second line, after the factor
+                assert label.endswith(f"({offset})") or f"({offset})\n(" in label
+                assert not axis.get_offset_text().get_visible()
                 folded.append(axis.axis_name)
     assert "y" in folded                  # forces of order 1e-3: the y axes have a factor
 
@@ -876,10 +898,11 @@ def test_a_record_that_does_not_rebuild_is_named_not_silently_dropped(tmp_path, 
 
 def test_caption_numbers_are_rounded_before_they_are_written():
     """An SI force of 9.99999999998603e-06 N was captioned "10 × 10⁻⁶ N", 9999.6 was
-    "1e+04" and d = -0.0 was "-0" (a user's hunt)."""
+    "1e+04" and d = -0.0 was "-0" (a user's hunt); P = -0.00346 had a hyphen where
+    P = -4.82e-4 had mathtext's minus (another)."""
     cases = {9.99999999998603e-06: "$10^{-5}$", 9999.6: "$10^{4}$", -0.0: "0", 1234.5: "1230",
              2.5e-4: r"$2.5\times10^{-4}$", -1e-5: "$-10^{-5}$", 0.135: "0.135", 0.5: "0.5",
-             0.00319: "0.00319", 12.0: "12"}
+             0.00319: "0.00319", 12.0: "12", -0.00346: "\u22120.00346"}
     assert {x: plots.number(x) for x in cases} == cases
 
 

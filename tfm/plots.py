@@ -119,14 +119,21 @@ def fold_offsets(fig):
             fmt.set_locs([t for t in axis.get_majorticklocs() if min(lo, hi) <= t <= max(lo, hi)])
             offset = fmt.get_offset()
             if offset and "(" + offset not in get_label():
-                set_label(f"{get_label()} ({offset})")
+                label = get_label()
+                if axis is ax.yaxis and label.endswith(")") and " (" in label:
+                    # the factor beside the unit, the note on a second line: one line ran
+                    # past the top of the axes into the panel's letter
+                    name, note = label.rsplit(" (", 1)
+                    set_label(f"{name} ({offset})\n({note}")
+                else:
+                    set_label(f"{label} ({offset})")
                 axis.get_offset_text().set_visible(False)
 
 
 def number(x, digits=3) -> str:
     """A number for a caption: 2×10⁻⁵ rather than 2e-05, 0.135 rather than 0.13500.
     Rounded first, then written: 9.9996e-6 is 10⁻⁵, not 10×10⁻⁶, and 9999.6 is 10⁴, not
-    1e+04; -0.0 is 0."""
+    1e+04; -0.0 is 0; negative numbers with a minus sign, not a hyphen, in either form."""
     if x == 0:
         return "0"
     if not math.isfinite(x):
@@ -135,7 +142,8 @@ def number(x, digits=3) -> str:
     exp = int(exp)
     if -3 <= exp < 4:
         text = f"{float(f'{mant}e{exp}'):.{max(digits - 1 - exp, 0)}f}"
-        return text.rstrip("0").rstrip(".") if "." in text else text
+        text = text.rstrip("0").rstrip(".") if "." in text else text
+        return text.replace("-", "\u2212")      # the minus sign, as mathtext writes the others
     mant = mant.rstrip("0").rstrip(".") if "." in mant else mant
     if mant in ("1", "-1"):
         return f"${mant[:-1]}10^{{{exp}}}$"
@@ -257,8 +265,9 @@ def reference_label(p) -> str | None:
     if p.shape == "paraboloid":
         return f"Hertz{' (smooth)' if smooth else ''}"
     if p.shape == "sphere":
-        return f"Hertz (paraboloid approximation of the sphere{smooth})"
-    return f"Boussinesq flat punch{' (smooth)' if smooth else ''}, $P = 2E^*R\\delta$"
+        return f"Hertz (paraboloid approx.{smooth})"       # short: a long name crossed its own line
+    # short: the legend sits in the corner the line starts from, and a long name crossed it
+    return f"{'smooth punch' if smooth else 'Boussinesq flat punch'}, $P = 2E^*R\\delta$"
 
 
 def _save(fig, path):
@@ -346,7 +355,9 @@ def draw_branches(ax1, ax2, curve, colours=PHASE_COLOURS, lw=1.0, labels=True):
             draw_jump(ax2, jump["force"], jump["contact_radius"], colour, None)
 
 
-def draw_reference(ax1, ax2, p, dmax):
+def draw_reference(ax1, ax2, p, dmax, pmax=np.inf):
+    """The analytical curve of the run's shape: P(delta) up to ``dmax`` on (a), a(P) up to
+    ``pmax`` (the run's largest force) on (b)."""
     label = reference_label(p)
     if label is None:
         return
@@ -355,9 +366,13 @@ def draw_reference(ax1, ax2, p, dmax):
     P = theory.preload_force(p.shape, delta, p.radius) * force_scale(p)
     a = np.full_like(delta, p.radius) if p.shape == "flat_punch" else theory.hertz_radius(delta, p.radius)
     ax1.plot(delta, P, "k--", lw=0.8, label=label)
-    ax2.plot(P, a, "k--", lw=0.8, label=label if p.shape != "flat_punch" else None)
+    # (b) compares a at the same force, over the run's forces: a rough punch's reference
+    # reached 4x its largest force and squeezed its curve into the left quarter
+    upto = P <= max(pmax, 0.0)
+    upto[:2] = True
+    ax2.plot(P[upto], a[upto], "k--", lw=0.8, label=label if p.shape != "flat_punch" else None)
     if p.shape == "flat_punch":          # (b) has no legend of its own: name the line there
-        ax2.annotate("$a = R$", (P[-1], p.radius), xytext=(0, -4), textcoords="offset points",
+        ax2.annotate("$a = R$", (P[upto][-1], p.radius), xytext=(0, -4), textcoords="offset points",
                      ha="right", va="top", fontsize=7)
 
 
@@ -372,7 +387,7 @@ def plot_curve(curve, params=None, path=None, title=None, hertz=True, reuse=None
     fig, (ax1, ax2) = figure(2, reuse=reuse)
     draw_branches(ax1, ax2, curve)
     if hertz and params is not None:
-        draw_reference(ax1, ax2, params, float(curve["indent"].max()))
+        draw_reference(ax1, ax2, params, float(curve["indent"].max()), float(np.max(curve["force"])))
     _curve_axes(ax1, ax2, params)
     if title is None and params is not None:
         title = run_caption(params)
