@@ -869,6 +869,49 @@ def test_the_contact_line_runs_between_contact_and_free_springs(layout):
     assert (cKDTree(pts[con]).query(v)[0] < a).all() and (cKDTree(pts[~con]).query(v)[0] < a).all()
 
 
+@pytest.mark.parametrize("layout", ["hexagonal", "jittered"])
+def test_off_grid_contact_maps_draw_each_spring_as_its_own_cell(layout):
+    """Hexagonal and jittered maps drew each spring as a marker sized in points for a
+    guessed panel width: about 1.8 spacings across, so the painted contact reached past the
+    contact line (a user's hunt). Each spring is now its cell in data units, the Voronoi
+    cell on both layouts (the hexagon on the lattice): it holds its spring and no other,
+    and the cells tile the plane."""
+    from types import SimpleNamespace
+
+    from matplotlib.path import Path as MPath
+
+    from tfm import geometry
+
+    a = 1 / 32
+    lay = geometry.hexagonal_grid(a, 0.3) if layout == "hexagonal" else geometry.jittered_grid(a, 0.3, 0.25, 1)
+    params = {"spacing": a, "layout": layout}
+    pts = np.column_stack([lay.x, lay.y])
+    cells = plots.spring_cells(lay.x, lay.y, params)
+    assert len(cells) == lay.n
+    inner = np.flatnonzero(np.hypot(lay.x, lay.y) < 0.2)
+    area = 0.0
+    for i in inner:
+        path = MPath(cells[i])
+        holds = path.contains_points(pts)
+        assert holds[i] and holds.sum() == 1
+        assert np.hypot(*(cells[i] - pts[i]).T).max() <= a       # a cell is about one spacing
+        xc, yc = cells[i].T
+        area += 0.5 * abs(np.dot(xc, np.roll(yc, 1)) - np.dot(yc, np.roll(xc, 1)))
+    if layout == "hexagonal":       # the lattice's Voronoi cell, exactly
+        assert area == pytest.approx(inner.size * np.sqrt(3) / 2 * a * a, rel=1e-12)
+    # they tile: a point well inside lies in exactly one cell (no gap, no overlap)
+    probe = np.random.default_rng(0).uniform(-0.12, 0.12, (2000, 2))
+    hits = np.array([MPath(cells[i]).contains_points(probe) for i in inner]).sum(axis=0)
+    assert (hits == 1).all()
+    # the map paints those cells
+    state = np.where(np.hypot(lay.x, lay.y) < 0.15, 1, 2)
+    fields = SimpleNamespace(grid=False, x=lay.x, y=lay.y, f_th=np.full(lay.n, 0.1), params=params)
+    fig, (ax,) = plots.figure(1)
+    image = plots.ContactMap(ax, fields, {"F": np.zeros(lay.n), "state": state}, colorbar=False).image
+    assert len(image.get_paths()) == lay.n
+    assert np.allclose(image.get_paths()[0].vertices[:len(cells[0])], cells[0])
+
+
 def test_a_record_that_does_not_rebuild_is_named_not_silently_dropped(tmp_path, capsys):
     """A height-map run whose map has moved: the figure is drawn without its caption, and
     the views say why (the caption vanished without a word)."""

@@ -434,6 +434,33 @@ def force_limits(f_th_max, fields_force_min):
     return min(float(fields_force_min), -hi), hi
 
 
+def spring_cells(x, y, params) -> list[np.ndarray]:
+    """Each spring's cell, corners (k, 2) in data units: on the hexagonal lattice its
+    Voronoi hexagon (pointy-topped, as the rows run along x; circumradius spacing/sqrt 3);
+    on the jittered layout its Voronoi cell, the part of the plane nearer to it than to any
+    other spring (so the contact line, halfway between neighbours, runs along cell edges),
+    or where that cell is open or reaches past a spacing (the layout's rim) a square of
+    side spacing."""
+    spacing = float(params.get("spacing"))
+    points = np.column_stack([x, y])
+    if params.get("layout") == "hexagonal":
+        angles = np.pi / 2 + np.arange(6) * np.pi / 3
+        corners = spacing / np.sqrt(3.0) * np.column_stack([np.cos(angles), np.sin(angles)])
+        return list(points[:, None, :] + corners[None, :, :])
+    square = 0.5 * spacing * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    from scipy.spatial import Voronoi
+
+    vor = Voronoi(points)
+    cells = []
+    for i, point in enumerate(points):
+        region = vor.regions[vor.point_region[i]]
+        corners = vor.vertices[region] if region and -1 not in region else None
+        if corners is None or np.abs(corners - point).max() > spacing:
+            corners = point + square
+        cells.append(corners)
+    return cells
+
+
 class ContactMap:
     """The force per spring on a diverging map (tension red, compression blue; the colour
     bar ends at the threshold F_th, marked, or at the largest one when thresholds vary;
@@ -469,16 +496,21 @@ class ContactMap:
             self.grey = ax.imshow(released.T, origin="lower", extent=self.extent,
                                   cmap=mpl.colors.ListedColormap(["0.75"]), interpolation="nearest")
         else:
+            from matplotlib.collections import PolyCollection
+
             x, y = fields.x, fields.y
-            ax.set_xlim(x.min(), x.max())
-            ax.set_ylim(y.min(), y.max())
-            spacing = float(fields.params.get("spacing", (x.max() - x.min()) / max(1.0, x.size ** 0.5)))
-            axis_pt = 0.42 * WIDTH * 72.0            # the map panel is about 0.42 of the width
-            size = (1.15 * axis_pt * spacing / (x.max() - x.min())) ** 2
-            self.grey = ax.scatter(x, y, s=size, c="0.75", marker="h", linewidths=0)
-            self.image = ax.scatter(x, y, s=size, c=shown, cmap=cmap, norm=self.norm, marker="h",
-                                    linewidths=0, plotnonfinite=False)
+            cells = spring_cells(x, y, fields.params)
+            # cells in data units: markers sized in points for a guessed panel width came
+            # out about twice a spring across and drew the contact larger than it was
+            self.grey = PolyCollection(cells, facecolors="0.75", linewidths=0)
+            self.image = PolyCollection(cells, array=shown, cmap=cmap, norm=self.norm, linewidths=0)
             self.grey.set_alpha(released)
+            ax.add_collection(self.grey)
+            ax.add_collection(self.image)
+            corners = np.concatenate(cells)
+            lo_xy, hi_xy = corners.min(axis=0), corners.max(axis=0)
+            ax.set_xlim(lo_xy[0], hi_xy[0])
+            ax.set_ylim(lo_xy[1], hi_xy[1])
         self._line(snap)
         ax.set_aspect("equal")
         # the grey and the black line are not on the colour bar: say what they are
