@@ -253,6 +253,13 @@ def test_runs_from_other_code_are_reported_stale_and_can_be_rerun(tmp_path, monk
     assert len(calls) == 2
     # the recomputed runs were counted as done and as already done ("6 ... 6 already done")
     assert "2 runs done, 0 failed, 0 already done" in capsys.readouterr().err
+    # stale runs left out by a selection were counted as already done and as not selected
+    # ("2 runs done, 0 failed, 6 already done, 6 not selected" of 8: a user's hunt)
+    monkeypatch.setattr("tfm.campaign.store.code_hash", lambda: "1" * 64)
+    run_campaign(spec, results_dir=tmp_path, rerun_stale=True, only=[spec.runs[0].run_id])
+    assert "1 run done, 0 failed, 0 already done, 1 not selected" in capsys.readouterr().err
+    run_campaign(spec, results_dir=tmp_path, only=[spec.runs[0].run_id])
+    assert "nothing to run, 2 of 2 runs already done" in capsys.readouterr().err
 
 
 def test_runs_computed_by_other_code_are_reported_as_they_arrive(tmp_path, monkeypatch, capsys):
@@ -353,7 +360,7 @@ def test_progress_bar_is_quiet_with_quiet_and_in_ci(tmp_path, monkeypatch, capsy
     run_campaign(tiny, quiet=quiet, results_dir=tmp_path)
     err = capsys.readouterr().err
     assert ("1/1" in err) == bar, err                       # the bar counts runs: "1/1 [...]"
-    assert ("campaign tiny: 1 runs done, 0 failed" in err) == line, err
+    assert ("campaign tiny: 1 run done, 0 failed" in err) == line, err
 
 
 def test_status_list_and_expand_commands(serial_run, tmp_path, capsys):
@@ -983,7 +990,7 @@ def test_a_capped_auto_preload_is_said_before_a_campaign_runs(tmp_path, capsys):
     assert spec.runs[0].notes and "auto preload capped at 0.5 R" in spec.runs[0].notes[0]
     root = run_campaign(spec, results_dir=tmp_path)
     err = capsys.readouterr().err
-    assert err.index("auto preload capped") < err.index("campaign capped: 1 runs done")
+    assert err.index("auto preload capped") < err.index("campaign capped: 1 run done")
     assert load_tables(root)[0]["status"].tolist() == ["flagged"]
     run_campaign(spec, results_dir=tmp_path / "quiet", quiet=True)   # a warning stays with -q (its help says so)
     assert "auto preload capped" in capsys.readouterr().err
@@ -1001,7 +1008,7 @@ def test_where_computes_only_the_selected_runs_and_resumes_the_rest(tmp_path, ca
     capsys.readouterr()
     assert tfm_main(args[:-1] + ["--where", "alpha=0.75", "--where", "spacing=1/20"]) == 0
     # the runs not selected are neither done nor forgotten
-    assert "1 runs done, 0 failed, 0 already done, 3 not selected" in capsys.readouterr().err
+    assert "1 run done, 0 failed, 0 already done, 3 not selected" in capsys.readouterr().err
     assert tfm_main(args[:-1] + ["--where", "alpha=0.75", "--where", "spacing=1/20"]) == 0
     assert "nothing to run, 1 of 4 runs already done, 3 not selected" in capsys.readouterr().err
     spec = load_spec(path)
@@ -1387,7 +1394,7 @@ def test_status_names_checkpoints_of_runs_no_longer_in_the_file(tmp_path, capsys
     capsys.readouterr()
     assert tfm_main(["campaign", "status", str(SMOKE), "--results-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert f"1 checkpoints in {store.checkpoints_dir} belong to runs no longer in the file (0123456789abcdef): " \
+    assert f"1 checkpoint in {store.checkpoints_dir} belongs to runs no longer in the file (0123456789abcdef): " \
            "they are kept" in out
 
 

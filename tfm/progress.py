@@ -32,6 +32,11 @@ def say(text: str) -> None:
             pass
 
 
+def counted(n: int, noun: str) -> str:
+    """'1 run', '2 runs', '0 runs' (the plural by an s)."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 def in_ci() -> bool:
     return os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
 

@@ -7,7 +7,7 @@ import signal
 import sys
 from pathlib import Path
 
-from ..progress import say
+from ..progress import counted, say
 from .spec import CampaignError, load_spec
 
 RESULTS_DIR = "results"      # default parent of results/<name>/
@@ -121,7 +121,7 @@ def cmd_run(args) -> int:
         print(f"{len(status.flagged)} runs are flagged (see the r_warnings column of "
               f"{root / 'summary.parquet'})", file=sys.stderr)
     if status.failed:
-        print(f"{len(status.failed)} runs failed; tracebacks in {root / 'failures.parquet'}",
+        print(f"{counted(len(status.failed), 'run')} failed; tracebacks in {root / 'failures.parquet'}",
               file=sys.stderr)
         return 1
     return 0
@@ -174,7 +174,7 @@ def cmd_status(args) -> int:
         print("  " + "; ".join(said))
     orphans = store.orphan_checkpoints(spec)
     if orphans:
-        print(f"  {len(orphans)} checkpoints in {store.checkpoints_dir} belong to runs no longer in the file "
+        print(f"  {counted(len(orphans), 'checkpoint')} in {store.checkpoints_dir} belong{'s' if len(orphans) == 1 else ''} to runs no longer in the file "
               f"({', '.join(orphans[:3])}{', ...' if len(orphans) > 3 else ''}): they are kept; put the "
               "values back to continue them, or delete them")
     state = {**{r: "pending" for r in st.pending}, **{r: "done" for r in st.done},

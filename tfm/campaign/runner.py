@@ -30,6 +30,7 @@ from typing import Any, Iterator
 from ..config import CHECKPOINT_EVERY
 from ..guards import GuardError, check_cost, direct_cost_note, n_springs
 from ..params import ParameterError
+from ..progress import counted
 from .spec import CampaignError, CampaignSpec, Run, load_spec
 from .store import CampaignStore
 
@@ -188,7 +189,8 @@ def _run_locked(spec, store, client, jobs, quiet, retry_failed, rerun_stale, onl
         if rerun_stale:
             redo |= set(status.stale)
         else:
-            print(f"warning: campaign {spec.name}: {len(status.stale)} stored runs were computed "
+            print(f"warning: campaign {spec.name}: {counted(len(status.stale), 'stored run')} "
+                  f"{'was' if len(status.stale) == 1 else 'were'} computed "
                   "by other tfm source code (prov_code_hash, a hash of its files; see prov_git_commit); "
                   "they are kept. Use --rerun-stale to recompute them.", file=sys.stderr)
     extra = store.extra_note(status)
@@ -197,7 +199,10 @@ def _run_locked(spec, store, client, jobs, quiet, retry_failed, rerun_stale, onl
     damaged = store.damaged_note(status)
     if damaged:                        # even with quiet: stored data were lost
         print(f"warning: campaign {spec.name}: {damaged}", file=sys.stderr)
-    left_out = ""                       # pending runs outside ``only``, said as left_out_as
+    # done and kept, selected or not; a stale run left out by ``only`` is "not selected"
+    # only (it was counted twice: "2 runs done, 6 already done, 6 not selected" of 8)
+    already = len(set(status.done) - redo)
+    left_out = ""                       # runs to compute outside ``only``, said as left_out_as
     if only is not None:                 # run ids, or the Run records select_runs returns
         chosen = {getattr(r, "run_id", r) for r in only}
         n_out = len(redo - chosen)
@@ -237,14 +242,14 @@ def _run_locked(spec, store, client, jobs, quiet, retry_failed, rerun_stale, onl
             else:
                 outcomes = _run_serial(todo, ckpt, stop)
             try:
-                _consume(spec, store, todo, outcomes, skipped=len(set(status.done) - redo), quiet=quiet,
+                _consume(spec, store, todo, outcomes, skipped=already, quiet=quiet,
                          handled=handled, left_out=left_out)
             except KeyboardInterrupt:
                 if stop.signum is None:
                     raise
         elif not quiet:
             # runs not done and not selected: they are not "done" (tfm limit's kept points)
-            print(f"campaign {spec.name}: nothing to run, {len(status.done)} of {len(spec.runs)} runs "
+            print(f"campaign {spec.name}: nothing to run, {already} of {len(spec.runs)} runs "
                   f"already done" + (f", {left_out}" if left_out else "")
                   + f" -> {store.root}", file=sys.stderr)
         try:
@@ -346,10 +351,10 @@ def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped
         outcomes.close()
         bar.close()
     if other_code > 1:
-        print(f"warning: campaign {spec.name}: {other_code} runs were computed by other tfm source code "
+        print(f"warning: campaign {spec.name}: {counted(other_code, 'run')} were computed by other tfm source code "
               "(see prov_code_hash)", file=sys.stderr)
     if not quiet and len(handled) == len(todo):
-        print(f"campaign {spec.name}: {len(todo) - failed} runs done, {failed} failed, "
+        print(f"campaign {spec.name}: {counted(len(todo) - failed, 'run')} done, {failed} failed, "
               f"{skipped} already done" + (f", {left_out}" if left_out else "")
               + f" -> {store.root}", file=sys.stderr)
 
