@@ -200,6 +200,8 @@ def check_positive_definite(p: Params, spec: KernelSpec, layout: Layout, symbol=
         scale = float(np.abs(sym).max())
     else:
         _check_pairs(p, spec, layout)
+        if p.layout == "jittered":        # the lattices' clusters are all alike: the patch has them
+            _check_clusters(p, spec, layout)
         # The smallest eigenvalue of a central patch falls towards the layout's as the
         # patch grows (the lattice sum's edge, like 1/sqrt(N)): a patch of 1200 accepted a
         # hexagonal self term whose 3000 springs are indefinite. Extrapolated from 300 and
@@ -255,11 +257,13 @@ def _kernel_params(p: Params) -> str:
 
 def _kernel_advice(p: Params) -> str:
     if p.layout == "jittered" and p.kernel != "local":
-        # springs stay >= (1 - 2 jitter) spacings apart; C_ij = 1/r < C_ii there
+        # springs stay >= (1 - 2 jitter) spacings apart; C_ij = 1/r < C_ii there. That
+        # keeps every pair's block positive, not a cluster's: no jitter is called safe.
         safe = (1.0 - 1.0 / p.self_term) / 2.0
         if safe > 0:
-            return (f"Lower jitter (below {safe:.3g} no pair is closer than 1/self_term spacings) or try "
-                    "another seed, raise self_term or change the kernel.")
+            return (f"Lower jitter (below {safe:.3g} no pair is closer than 1/self_term spacings, though "
+                    "a cluster of springs can still be) or try another seed, raise self_term or change "
+                    "the kernel.")
     if p.kernel == "neighbors":
         return ("Raise neighbor_rings or self_term (at self_term 3.8 on the square grid, neighbor_rings 2 "
                 "or more is positive definite), or change the kernel.")
@@ -297,6 +301,44 @@ def _check_pairs(p: Params, spec: KernelSpec, layout: Layout) -> None:
             f"spring to itself (the closest {r[k] / layout.spacing:.3g} spacings apart, at "
             f"({layout.x[i[k]]:.4g}, {layout.y[i[k]]:.4g})), so the contact problem is ill-posed. "
             f"{_kernel_advice(p)}")
+
+
+#: springs per cluster of _check_clusters (a spring and its nearest neighbours)
+CLUSTER = 9
+CLUSTER_CHUNK = 20000
+
+
+def _check_clusters(p: Params, spec: KernelSpec, layout: Layout) -> None:
+    """Refuse if the block of some spring and its CLUSTER - 1 nearest neighbours is (nearly)
+    singular or indefinite (interlacing again: then C is too). Four springs of one cell
+    of a jittered grid, drawn together, made an indefinite 4 x 4 block with no pair closer
+    than 1/self_term spacings: the pairs passed, and the central patch missed it 30
+    spacings out (a user's hunt). Over all springs, in chunks: about 20 us a spring."""
+    from scipy.spatial import cKDTree
+
+    pts = np.column_stack([layout.x, layout.y])
+    k = min(CLUSTER, layout.n)
+    _, near = cKDTree(pts).query(pts, k=k)
+    near = near.reshape(layout.n, k)
+    for start in range(0, layout.n, CLUSTER_CHUNK):
+        idx = near[start:start + CLUSTER_CHUNK]
+        xs, ys = layout.x[idx], layout.y[idx]
+        C = spec.offdiag(np.hypot(xs[:, :, None] - xs[:, None, :], ys[:, :, None] - ys[:, None, :]))
+        diag = np.arange(k)
+        C[:, diag, diag] = spec.diag[idx]
+        eig = np.linalg.eigvalsh(C)
+        bad = eig[:, 0] <= PD_RTOL * eig[:, -1]
+        if bad.any():
+            i = int(np.argmin(np.where(bad, eig[:, 0] / eig[:, -1], np.inf)))
+            c = idx[i]
+            gaps = np.hypot(xs[i, :, None] - xs[i, None, :], ys[i, :, None] - ys[i, None, :])
+            closest = gaps[np.triu_indices(k, 1)].min() / layout.spacing
+            raise IllPosedKernel(
+                f"kernel: the compliance with {_kernel_params(p)} is not positive definite: the "
+                f"{k} springs around ({layout.x[c[0]]:.4g}, {layout.y[c[0]]:.4g}) (the closest two "
+                f"{closest:.3g} spacings apart) have a block with smallest eigenvalue "
+                f"{eig[i, 0]:.4g} against a largest of {eig[i, -1]:.4g}, so the contact problem is "
+                f"ill-posed. {_kernel_advice(p)}")
 
 
 # ----------------------------------------------------------------- preconditioners
