@@ -190,6 +190,11 @@ BYTES_PER_NEIGHBOUR = 70.0
 # --snapshots events (1/512, extent 1: 511 -> 569 MiB peak), 2026-11-25
 BYTES_PER_SNAPSHOT_SPRING = 64.0
 BASELINE_BYTES = 450e6     # measured 238 to 420 MiB after imports (and compilation)
+# a height map is held as float64 for the whole run (tfm.surfaces: cached, checked and
+# sampled without whole-map copies): a 6001^2 map at spacing 1/32 peaked at 495 MiB
+# against 220 MiB for the same run from a 64^2 map, 8.0 bytes a pixel, 2026-11-25; 12
+# with the transient mask of its check
+BYTES_PER_MAP_PIXEL = 12.0
 
 
 def estimate_memory(p) -> float:
@@ -199,7 +204,8 @@ def estimate_memory(p) -> float:
     solver's work vectors; the tree's keys and nodes), plus for the FFT operator the
     full-grid symbol on the padded P x P box (P = fast size >= 2n - 1: the kernel, its
     real transform and the preconditioner's inverse kernel) and the symbols of the field's smaller boxes,
-    plus the field snapshots' buffers, plus the Python/NumPy/SciPy/Numba runtime.
+    plus the field snapshots' buffers, plus a height map's pixels, plus the
+    Python/NumPy/SciPy/Numba runtime.
     """
     n = n_springs(p)
     total = BASELINE_BYTES + BYTES_PER_SPRING[p.operator_used] * n
@@ -213,6 +219,9 @@ def estimate_memory(p) -> float:
         total += BYTES_PER_SNAPSHOT_SPRING * n
     if p.operator == "tree" and p.kernel == "neighbors":     # pi m^2 neighbours per spring
         total += BYTES_PER_NEIGHBOUR * n * min(n, math.pi * (p.neighbor_rings + 0.5) ** 2)
+    if p.shape == "height_map":      # the map's own pixels (loaded already: cached)
+        from .surfaces import load_height_map
+        total += BYTES_PER_MAP_PIXEL * load_height_map(p.height_map).heights.size
     return total
 
 
