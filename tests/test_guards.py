@@ -139,9 +139,11 @@ def test_an_allowed_run_is_flagged():
 
     p = Params.from_dict(dict(spacing="1/16", k_th=0.02, shape="paraboloid", max_indent=0.01, step=1e-3,
                               allow="coarse"))
-    with pytest.warns(RunWarning, match="allowed past the 'coarse' guard: spacing: only"):
+    with pytest.warns(RunWarning, match="allowed past the 'coarse' guard: spacing: only") as caught:
         res = simulate(p)
     assert not res.ok and "allowed past the 'coarse' guard" in res.summary["warnings"]
+    # said once, before the run: the summary's warnings repeated every pre-run note
+    assert sum("allowed past" in str(w.message) for w in caught) == 1
 
 
 def test_the_guards_refuse_in_simulate_before_any_work(monkeypatch):

@@ -421,7 +421,7 @@ def test_threshold_forces_carry_the_disorder():
     with pytest.raises(ParameterError, match="threshold_disorder: unknown value"):
         Params(threshold_disorder="gauss", disorder_width=0.1)
     # no width given: said so ("must be in [0.015, 2] ... got 0.0" read as a bad zero)
-    with pytest.raises(ParameterError, match=r"disorder_width: must be > 0 with threshold_disorder='weibull' .*it is 0, its default when not given"):
+    with pytest.raises(ParameterError, match=r"disorder_width: must be > 0 with threshold_disorder='weibull' .*it is 0 \(also its default when not given\)"):
         Params(f_th=2e-4, threshold_disorder="weibull")
     assert Params.from_dict({"threshold_disorder": None}).threshold_disorder == "none"
 
@@ -777,6 +777,18 @@ def test_a_map_on_another_layout_gets_a_grid_it_covers(tmp_path, layout):
         step = p.spacing * (np.sqrt(3) / 2 if layout == "hexagonal" else 1.0)
         assert max(np.abs(lay.x).max(), np.abs(lay.y).max()) > reach - step - p.jitter * p.spacing - 1e-12
         assert np.isfinite(heights(p, lay)).all()
+
+
+def test_a_jittered_grid_too_large_for_its_map_names_the_jitters_reach(tmp_path):
+    """--extent 1 on a map covering +-1 was refused with "grid (half-width 1.00781)", a
+    number no one gave: the extent plus the jitter's reach (a user's hunt)."""
+    m = tmp_path / "m.npy"
+    np.save(m, np.zeros((65, 65)))
+    with pytest.raises(ParameterError, match=r"covers \+-1, smaller than the grid \(half-width 1.00781: "
+                                             r"extent 1 plus the jitter's reach, 0.25 spacings\)"):
+        Params.from_dict(dict(shape="height_map", height_map=str(m), map_pixel_size="1/32", spacing="1/32",
+                              f_th=0, max_indent=0.01, step=5e-4, layout="jittered", operator="direct",
+                              extent=1))
 
 
 # ---- messages that name the real cause (a user's hunt, 2026-11-25) --------------------

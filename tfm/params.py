@@ -918,7 +918,7 @@ def _validate_surface(p: Params) -> None:
     if p.threshold_disorder != "none" and w == 0.0:
         # "must be in [0.015, 2] ... got 0.0" read as if a zero had been given
         raise ParameterError(f"disorder_width: must be > 0 with threshold_disorder={p.threshold_disorder!r} (the "
-                             "std/mean of the thresholds, e.g. 0.3); it is 0, its default when not given")
+                             "std/mean of the thresholds, e.g. 0.3); it is 0 (also its default when not given)")
     if p.threshold_disorder == "uniform" and not 0.0 < w <= MAX_UNIFORM_WIDTH:
         raise ParameterError(f"disorder_width: must be in (0, {MAX_UNIFORM_WIDTH:.4f}] for 'uniform' "
                              f"(std/mean; 1/sqrt(3) keeps F_th >= 0), got {w!r}")
@@ -997,8 +997,10 @@ def _check_map_covers(p: Params) -> None:
                    + (" (L* = 1 m in paper units)" if p.units == "paper" else "")
                    if hm.pixel_size is not None and p.map_pixel_size is None else "")
             raise ParameterError(f"height_map: the map ({nx} x {ny} pixels of {map_pixel(p, hm):g}{own}) covers "
-                                 f"+-{avail:g}, smaller than the grid (half-width {max(need, p.spacing):g}); "
-                                 "use a larger map, a smaller extent or a finer spacing")
+                                 f"+-{avail:g}, smaller than the grid (half-width {max(need, p.spacing):g}"
+                                 + (f": extent {hw:g} plus the jitter's reach, {p.jitter:g} spacings"
+                                    if p.layout == "jittered" and hw > 0 else "")
+                                 + "); use a larger map, a smaller extent or a finer spacing")
 
 
 def _validate_units(p: Params) -> None:

@@ -169,10 +169,11 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
             curve, summary = to_si_curve(curve, p), to_si_summary(summary, p)
         labels = unit_labels(p)
         summary["length_unit"], summary["force_unit"] = labels["length"], labels["force"]
-        summary["warnings"] = "; ".join(filter(None, notes + [summary["warnings"]]))
+        found = summary["warnings"]            # by the run; the notes were warned before it
+        if writer is not None and writer.stopped:   # a flag: the snapshots asked for are not all there
+            found = "; ".join(filter(None, [found, writer.stopped]))
+        summary["warnings"] = "; ".join(filter(None, notes + [found]))
         if writer is not None:
-            if writer.stopped:             # a flag: the snapshots asked for are not all there
-                summary["warnings"] = "; ".join(filter(None, [summary["warnings"], writer.stopped]))
             writer.close(summary)
     except BaseException:
         if writer is not None:
@@ -186,8 +187,8 @@ def simulate(p: Params | None = None, *, progress=None, fields_path=None, checkp
             LIVE_TEMPORARIES.discard(Path(fields_path))    # the result's from here on
             if own_path:
                 UNCLAIMED.add(Path(fields_path))           # until write_curve moves it
-    if summary["warnings"]:
-        warnings.warn(f"run {p.run_id}: {summary['warnings']}", RunWarning, stacklevel=2)
+    if found:             # the notes again made every pre-run note a warning twice
+        warnings.warn(f"run {p.run_id}: {found}", RunWarning, stacklevel=2)
     # a resumed run says so: the steps before this one were computed by an earlier process
     prov["resumed_at_step"] = (ckpt.resumed_at or 0) if ckpt is not None else 0
     if ckpt is not None and ckpt.resumed_at:
