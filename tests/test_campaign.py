@@ -133,7 +133,7 @@ BASE = 'name = "bad"\n[base]\nspacing = "1/32"\nk_th = 0.02\nshape = "paraboloid
     (BASE.replace('name = "bad"\n[base]\n', '[base]\nname = "bad"\n'),
      ["name: found inside [base]", "must come before the first [table]"]),
     (BASE.replace('"bad"', '"../up"'), ["name", "folder-safe"]),
-    ('description = "no name"\n', ["name"]),
+    ('description = "no name"\n', ["missing key 'name'", "results/<name>/"]),
     (BASE + "[sweep]\nalpha = 0.5\n", ["[sweep] alpha", "needs a list"]),
     (BASE + "[sweep]\nalpha = []\n", ["[sweep] alpha", "empty list"]),
     (BASE + "[[zip]]\nradius = [0.5, 1.0]\nstep = [1e-3]\n", ["[[zip]] #1", "same length", "radius has 2"]),
@@ -170,6 +170,7 @@ def test_a_direct_run_of_weeks_is_refused_before_the_campaign_starts(tmp_path, c
     assert tfm_main(["campaign", "run", str(path), "--results-dir", str(tmp_path / "res")]) == 2
     err = capsys.readouterr().err
     assert f"{path}: run 0 " in err and "the direct sum over" in err and 'allow = "cost"' in err
+    assert "--allow" not in err and err.count("to run it anyway") == 1     # the file's advice, once
     assert not list((tmp_path / "res").rglob("*.parquet"))            # nothing ran
     allowed = text.replace('operator = "direct"', 'operator = "direct"\nallow = "cost"')
     path.write_text(allowed)
@@ -1572,3 +1573,13 @@ def test_status_says_a_changed_height_map_left_the_tables_behind(tmp_path, capsy
     out = capsys.readouterr().out
     assert "out of date: they hold runs the campaign file no longer expands to" in out
     assert "gone or damaged" not in out
+    # run on the new content, then the old content put back: its runs are on disk and
+    # current again, and the tables hold the new content's; that was called "stored after
+    # they were written, by a campaign process that stopped" (another hunt)
+    run_campaign(toml, quiet=True, results_dir=tmp_path)
+    np.save(tmp_path / "bowl.npy", bowl)
+    capsys.readouterr()
+    assert tfm_main(["campaign", "status", str(toml), "--results-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "out of date: they hold runs the campaign file no longer expands to" in out
+    assert "stopped before rebuilding" not in out

@@ -65,7 +65,10 @@ GUARDS = {
 
 
 class GuardError(ParameterError):
-    """A valid record whose run would mean nothing (or not fit); ``allow`` overrides it."""
+    """A valid record whose run would mean nothing (or not fit); ``allow`` overrides it.
+    ``reason``: the message without the advice on how to override it."""
+
+    reason: str = ""
 
 
 def _below(x: float, limit: float, digits: int = 3) -> str:
@@ -79,7 +82,9 @@ def _below(x: float, limit: float, digits: int = 3) -> str:
 
 
 def _refuse(guard: str, message: str) -> None:
-    raise GuardError(f"{message}. To run it anyway, allow={guard!r} (CLI: --allow {guard}).")
+    exc = GuardError(f"{message}. To run it anyway, allow={guard!r} (CLI: --allow {guard}).")
+    exc.reason = message
+    raise exc
 
 
 def _guard(notes: list, allowed: set, guard: str, message: str) -> None:

@@ -304,8 +304,9 @@ def _check_cost(spec, todo: list[Run]) -> None:
         try:
             check_cost(run.params)
         except GuardError as exc:
-            raise CampaignError(f"{spec.source}: run {run.index} {run.run_id}: {exc} Give the run "
-                                "allow = \"cost\" in the campaign file to run it anyway") from None
+            # the guard's own advice names the command line's flag: a campaign's is its file
+            raise CampaignError(f"{spec.source}: run {run.index} {run.run_id}: {exc.reason or exc}. Give the "
+                                "run allow = \"cost\" in the campaign file to run it anyway") from None
 
 
 def _consume(spec, store, todo, outcomes: Iterator[tuple[Run, Outcome]], skipped: int, quiet: bool,

@@ -158,6 +158,8 @@ def spec_from_dict(data: Mapping[str, Any], *, source: str = "<dict>", max_runs:
         if inside:
             raise CampaignError(f"{where}: name: found inside [{inside[0]}]; the top-level keys (name, "
                                 "description, ...) must come before the first [table] of the file")
+        raise CampaignError(f"{where}: missing key 'name' (the campaign's name, its results folder: "
+                            "results/<name>/), e.g. name = \"sweep1\" before the first [table]")
     if not isinstance(name, str) or not NAME_PATTERN.match(name):
         raise CampaignError(f"{where}: name: expected a folder-safe name (letters, digits, '.', '_', '-'; "
                             f"starting with a letter or digit), got {name!r}")

@@ -359,10 +359,10 @@ class CampaignStore:
             return None
         n = len(status.extra)
         return (f"{n} stored run{'s' if n > 1 else ''} in {self.root} {'are' if n > 1 else 'is'} not in the "
-                f"campaign file now (values removed from it, or a height map's content changed: its hash is "
-                f"in the run id?): kept on disk in {self.runs_dir.name}/ or {self.failures_dir.name}/, and left out "
-                "of the tables when they are next built; put the values (or the map) back to have them in "
-                "the tables again")
+                f"campaign file now (values removed from it, a [base] value changed, or a height map's content "
+                f"changed: its hash is in the run id?): kept on disk in {self.runs_dir.name}/ or "
+                f"{self.failures_dir.name}/, and left out of the tables when they are next built; put the values "
+                "(or the map) back to have them in the tables again")
 
     # ---- campaign tables ---------------------------------------------------
     def write_tables(self, spec: CampaignSpec, status: Status | None = None) -> bool:
@@ -442,13 +442,15 @@ class CampaignStore:
             return "the campaign file has changed since they were written, and they hold the runs of the file as it was"
         then = set(written.get("run_ids") or []) | set(written.get("failed") or [])
         now = set(record["run_ids"]) | set(record["failed"])
+        # first: the file expands to other runs (a height map's content put back makes the
+        # runs of the old content current again, and they were not "stored after")
+        if then - now and (then - now) <= set(status.extra):
+            # the run files are there: the file expands to other run ids now
+            return ("they hold runs the campaign file no longer expands to (stored runs whose parameters, "
+                    "or height map's content, are no longer those of the file)")
         if now - then:
             return "runs were stored after they were written, by a campaign process that stopped before rebuilding them"
         if then - now:
-            if (then - now) <= set(status.extra):
-                # the run files are there: the file expands to other run ids now
-                return ("they hold runs the campaign file no longer expands to (stored runs whose parameters, "
-                        "or height map's content, are no longer those of the file)")
             return "they hold runs whose files are now gone or damaged (those runs are pending again)"
         if (written.get("run_ids"), written.get("failed")) != (record["run_ids"], record["failed"]):
             return "runs have moved between done and failed since they were written"
