@@ -33,8 +33,11 @@ from tfm.params import Params
 from tfm.surfaces import fourier_synthesis, grid_side, wavevectors
 from tfm.theory import E_STAR, gamma_from_k
 
-CAMPAIGN = Path("campaigns/rough_sphere.toml")
-OUT = Path("results/rough")
+# the repository's folders, wherever it is run from (it failed outside the root with a
+# traceback: "campaigns/rough_sphere.toml: no such campaign file")
+ROOT = Path(__file__).resolve().parent.parent
+CAMPAIGN = ROOT / "campaigns/rough_sphere.toml"
+OUT = ROOT / "results/rough"
 ROUGH_FIELDS = ("rms_height", "rms_slope", "hurst", "short_cutoff", "long_cutoff", "rolloff", "roughness_seed")
 
 
@@ -58,8 +61,8 @@ def smooth_reference(spec) -> tuple[Params, dict]:
 
 def main():
     spec = load_spec(CAMPAIGN)
-    summary = pd.read_parquet("results/rough_sphere/summary.parquet")
-    curves = pd.read_parquet("results/rough_sphere/curves.parquet")
+    summary = pd.read_parquet(ROOT / "results/rough_sphere/summary.parquet")
+    curves = pd.read_parquet(ROOT / "results/rough_sphere/curves.parquet")
     by_id = {r.run_id: r.params for r in spec.runs}
     p0, smooth = smooth_reference(spec)
     gamma = gamma_from_k(p0.k_th)
@@ -115,11 +118,20 @@ def _figure(summary, curves, stats, smooth, path):
     ax[0].axhline(1.0, color="k", lw=0.8, ls=":")
     ax[0].set(xlabel="Fuller–Tabor parameter θ = E* σ^1.5 / (β^0.5 γ)", ylabel="pull-off / smooth pull-off",
               title="rough sphere, α = 0.75")
+    # the flagged runs (the README says why: an rms slope above 1), marked where they are
+    bad = summary["status"] != "ok"
+    if bad.any():
+        marked = per_run[bad.to_numpy()]
+        ax[0].plot(marked["theta_ft"], marked["ratio"], "x", color="C3", ms=7, label="flagged run")
+        ax[1].plot(marked["p_rms_height"], marked["hyst"], "x", color="C3", ms=7, label="flagged run")
+        ax[1].legend(fontsize=8)
     ax[0].legend(fontsize=8)
     ax[1].semilogx(per_run["p_rms_height"], per_run["hyst"], "o", mfc="none", color="0.6")
     ax[1].errorbar(stats["p_rms_height"], stats["hysteresis_ratio_mean"], yerr=stats["hysteresis_ratio_std"],
                    fmt="s-", color="C1", capsize=3)
     ax[1].axhline(1.0, color="k", lw=0.8, ls=":")
+    # the swept values as ticks: a log axis over less than a decade showed only 10^-2
+    ax[1].set_xticks(stats["p_rms_height"], [f"{v:g}" for v in stats["p_rms_height"]])
     ax[1].xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax[1].set(xlabel="rms height σ", ylabel="hysteresis / smooth hysteresis", title="energy dissipated per cycle")
     # one seed's curves at each rms height
@@ -137,9 +149,9 @@ def _figure(summary, curves, stats, smooth, path):
 
 def punch_table():
     """Contact fraction at maximum load and the A(P) slope of the rough punch campaign."""
-    spec = load_spec("campaigns/rough_punch_area_load.toml")
-    summary = pd.read_parquet("results/rough_punch_area_load/summary.parquet")
-    curves = pd.read_parquet("results/rough_punch_area_load/curves.parquet")
+    spec = load_spec(ROOT / "campaigns/rough_punch_area_load.toml")
+    summary = pd.read_parquet(ROOT / "results/rough_punch_area_load/summary.parquet")
+    curves = pd.read_parquet(ROOT / "results/rough_punch_area_load/curves.parquet")
     p = spec.runs[0].params
     nominal = math.pi * p.radius ** 2
     stats = ensemble_stats(summary, curves, by=["p_k_th"])
@@ -165,5 +177,5 @@ def punch_table():
 
 if __name__ == "__main__":
     main()
-    if Path("results/rough_punch_area_load/summary.parquet").exists():
+    if (ROOT / "results/rough_punch_area_load/summary.parquet").exists():
         punch_table()
