@@ -129,27 +129,27 @@ def test_a_jittered_cluster_that_is_indefinite_without_any_close_pair_is_refused
     every spring. The dense matrix of the punch's springs is the slow twin."""
     kw = dict(shape="flat_punch", radius=1.1, k_th=0.02, spacing="1/32", extent=1.2, max_indent=0.005,
               step=2.5e-4, layout="jittered", jitter=0.367, seed=1322, operator="direct")
+    def under_the_punch(p):
+        """The layout, the kernel and the smallest eigenvalue of the dense matrix of the
+        springs under the punch (all in contact at the preload)."""
+        layout = make_layout(p)
+        spec = kernel_spec(p, layout)
+        under = np.flatnonzero(np.hypot(layout.x, layout.y) <= 1.1)
+        xs, ys = layout.x[under], layout.y[under]
+        C = spec.offdiag(np.hypot(xs[:, None] - xs[None, :], ys[:, None] - ys[None, :]))
+        C[np.diag_indices_from(C)] = spec.diag[under]
+        return layout, spec, np.linalg.eigvalsh(C)[0]
+
     p = Params.from_dict(kw)
-    layout = make_layout(p)
-    spec = kernel_spec(p, layout)
-    under = np.flatnonzero(np.hypot(layout.x, layout.y) <= 1.1)
-    xs, ys = layout.x[under], layout.y[under]
-    C = spec.offdiag(np.hypot(xs[:, None] - xs[None, :], ys[:, None] - ys[None, :]))
-    C[np.diag_indices_from(C)] = spec.diag[under]
-    assert np.linalg.eigvalsh(C)[0] < -1.0                 # indefinite: the run is ill-posed
+    layout, spec, smallest = under_the_punch(p)
+    assert smallest < -1.0                 # indefinite: the run is ill-posed
     with pytest.raises(IllPosedKernel, match=r"jitter=0\.367, seed=1322 is not positive definite: the 9 "
                                              r"springs around .*though a cluster of springs can still be"):
         check_positive_definite(p, spec, layout)
     # a seed whose dense matrix is positive definite passes
     q = Params.from_dict({**kw, "seed": 1})
-    lq = make_layout(q)
-    sq = kernel_spec(q, lq)
-    under = np.flatnonzero(np.hypot(lq.x, lq.y) <= 1.1)
-    xs, ys = lq.x[under], lq.y[under]
-    C = sq.offdiag(np.hypot(xs[:, None] - xs[None, :], ys[:, None] - ys[None, :]))
-    C[np.diag_indices_from(C)] = sq.diag[under]
-    assert np.linalg.eigvalsh(C)[0] > 0
-    assert check_positive_definite(q, sq, lq) > 0
+    layout, spec, smallest = under_the_punch(q)
+    assert smallest > 0 and check_positive_definite(q, spec, layout) > 0
 
 
 def test_advice_never_asks_for_a_jitter_below_zero():
