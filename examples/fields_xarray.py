@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 import tfm
-from tfm.plots import draw_jump, fold_offsets, split_snap_off
+from tfm.plots import axis_label, draw_jump, fold_offsets, force_label, split_snap_off
 
 
 def main(out: Path) -> None:
@@ -42,7 +42,7 @@ def main(out: Path) -> None:
     fig.get_layout_engine().set(wspace=0.1)          # room between (a)'s colour bar and (b)
     ax1, ax2 = fig.subplots(1, 2)
     snap["F"].where(in_contact).plot(ax=ax1, x="x", y="y", cmap="RdBu_r", center=0.0,
-                                     cbar_kwargs={"label": "spring force F (tension > 0)"})
+                                     cbar_kwargs={"label": axis_label("spring force $F$", "force", res.params, "tension > 0")})
     ax1.set_aspect("equal")
     ax1.set_title(f"(a) forces at pull-off, step {k}")
     ax2.plot(ds["force"], radius, "o", ms=3, label="from the fields")
@@ -50,8 +50,8 @@ def main(out: Path) -> None:
     line, = ax2.plot(body["force"], body["contact_radius"], "-", lw=0.8, label="curve table")
     if jump is not None:
         draw_jump(ax2, jump["force"], jump["contact_radius"], line.get_color())
-    ax2.set_xlabel("force P (compression > 0)")
-    ax2.set_ylabel("contact radius a")
+    ax2.set_xlabel(force_label(res.params))                  # tfm's own labels, units included
+    ax2.set_ylabel(axis_label("contact radius $a$", "length", res.params))
     ax2.set_title("(b) contact radius")
     # the corner the loop leaves free (by default the legend sat on the curve)
     ax2.legend(frameon=False, loc="lower right", fontsize="small")

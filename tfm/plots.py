@@ -108,7 +108,9 @@ def fraction_ticks(ax, spacings):
 
 def fold_offsets(fig):
     """Move a linear axis' common factor (×10⁻²) into its label: below the right end of
-    an x axis a long label ran into it, and above a y axis it ran into the panel's title."""
+    an x axis a long label ran into it, and above a y axis it ran into the panel's title.
+    A label with a note in parentheses gets the factor beside its unit and the note on a
+    second line."""
     for ax in fig.axes:
         for axis, get_label, set_label, lim in ((ax.xaxis, ax.get_xlabel, ax.set_xlabel, ax.get_xlim),
                                                 (ax.yaxis, ax.get_ylabel, ax.set_ylabel, ax.get_ylim)):
@@ -120,9 +122,10 @@ def fold_offsets(fig):
             offset = fmt.get_offset()
             if offset and "(" + offset not in get_label():
                 label = get_label()
-                if axis is ax.yaxis and label.endswith(")") and " (" in label:
+                if label.endswith(")") and " (" in label:
                     # the factor beside the unit, the note on a second line: one line ran
-                    # past the top of the axes into the panel's letter
+                    # past the top of the axes into the panel's letter (y), or past the
+                    # figure's edge under a narrow panel (x)
                     name, note = label.rsplit(" (", 1)
                     set_label(f"{name} ({offset})\n({note}")
                 else:
