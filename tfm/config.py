@@ -23,13 +23,17 @@ DECISION_SLACK = 10.0
 # enter stops to ask whether its decisions are already certain (tfm.kernels.contact.
 # snap_rounds): accepted only when a rigorous bound shows that a tol-solve would decide the
 # same; otherwise CG carries on, without restarting, to the next level and then to tol.
-# The last round of every step is solved to tol. CG iterations of the standard curve
-# (python -m bench.run_bench --only rounds prints them): 1/256, every round at tol 8930,
-# (1e-7,) 7122, (1e-4, 1e-7) 7081, (1e-3, 1e-5, 1e-7) 6916, (1e-5, 1e-8) 7395; 1/128,
-# 4619, 3836, 3721, 3531, 3655. The extra levels save under 3 % of the iterations but
-# each stop can cost a field u = C F on the whole grid: no faster. A single level of 1e-6
-# or looser leaves more springs in doubt (1/128: 1e-5 3904, 1e-4 4422).
-ROUND_TOLS = (1e-7,)
+# The last round of every step is solved to tol. A stop costs a pass over the contact set
+# (the snap check needs F alone); the field u = C F, which the entries need, is computed
+# only once the snaps are certain (beside the next round's solve when threaded), and where
+# nothing snaps not above FIELD_LEVEL. CG iterations of the standard curve (2026-11-28):
+# 1/256, (1e-7,) 6900, these 6194; 1/128, 3603 and 3236. At 1/256 the snaps were certain
+# in 728 of 1187 stops at 1e-5, and where springs snapped, the entries were too (206 of 206).
+ROUND_TOLS = (1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
+# The loosest of those levels at which a round where no spring snaps computes the field to
+# decide its entries: at 1e-5 and 1e-6 most such fields left entries in doubt (1/256: 179
+# of 297 and 114 of 180), at 1e-7 22 of 117.
+FIELD_LEVEL = 1e-7
 
 
 # Box size P from which the compiled FFT cuts its stages into one part per Numba thread

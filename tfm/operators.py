@@ -24,8 +24,8 @@ from .geometry import Layout
 from .kernels import fft as fftk
 from .kernels.compliance import BOUSSINESQ, LOCAL, NEIGHBORS, cutoff_squared
 from .kernels.ops import (PRE_DIAGONAL, PRE_FFT, PRE_NONE, PRE_STENCIL, DirectData, FFTData, PreData,
-                          SparseData, TreeData, cached_symbol, new_symbol_cache, precondition, restrict_pre,
-                          start_threads)
+                          SparseData, TreeData, box_buffers, cached_symbol, new_symbol_cache, pre_len,
+                          precondition, restrict_pre, start_threads)
 from .kernels.direct import direct_sum
 from .kernels.grid import index_box, stencil_apply
 from .params import ParameterError, Params
@@ -120,7 +120,7 @@ class FFTOperator:
         n = self.n
         P = fftk.fast_len(2 * n - 1)
         return FFTData(n, self.spacing, self.cut2, self.diag, self.syms, self.symbol(P),
-                       *fftk.buffers(n, P), 1)
+                       *fftk.buffers(n, P), *box_buffers(n, P, n * n), 1)
 
     def apply(self, src, f_src, tgt=None):
         n = self.n
@@ -403,8 +403,9 @@ class FFTPreconditioner:
 
     def compiled(self) -> PreData:
         """On one thread, as FFTOperator.compiled: the contact solve sets the mode."""
-        self._data = pre_data(PRE_FFT, n=self.op.n, kinv=self.kinv, floor=self.floor, psyms=self.psyms,
-                              threads=1)
+        n = self.op.n
+        self._data = pre_data(PRE_FFT, n=n, kinv=self.kinv, floor=self.floor, psyms=self.psyms,
+                              buffers=box_buffers(n, pre_len(n), n * n), threads=1)
         return self._data
 
 
@@ -422,14 +423,14 @@ class DiagonalPreconditioner:
 
 
 def pre_data(kind=PRE_NONE, inv_diag=None, stencil=None, n=0, kinv=None, floor=0.0, psyms=None,
-             threads=1) -> PreData:
+             buffers=None, threads=1) -> PreData:
     """PreData with empty stand-ins for what the kind does not use (Numba needs one type)."""
     if psyms is None:
         psyms = new_symbol_cache(0, np.ones((1, 1)))
     return PreData(kind, np.ascontiguousarray(np.ones(1) if inv_diag is None else inv_diag, dtype=float),
                    np.ascontiguousarray(np.zeros((1, 1)) if stencil is None else stencil, dtype=float),
                    int(n), np.ascontiguousarray(np.zeros((1, 1)) if kinv is None else kinv, dtype=float),
-                   float(floor), psyms, int(threads))
+                   float(floor), psyms, *(buffers or box_buffers(1, 1, 1)), int(threads))
 
 
 def make_preconditioner(p: Params, spec: KernelSpec, layout: Layout, symbol=None, operator=None):

@@ -15,9 +15,10 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .config import DECISION_SLACK, ROUND_TOLS
-from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, S_ENTERED, S_EXCEEDED,
-                              S_FAILURES, S_ITERS, S_REFINES, S_ROUNDS, S_SNAPPED, S_SOLVES, snap_rounds,
+from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS
+from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, S_AHEAD, S_DROPPED,
+                              S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS, S_REFINES, S_ROUNDS,
+                              S_SNAPPED, S_SOLVES, difference_quotients, extrapolate, snap_rounds,
                               solve_on_set)
 from .kernels.fft import THREADED_SIZE
 from .kernels.grid import blocked_dot
@@ -41,6 +42,8 @@ class Problem:
     snap_rule: str          # "batch" (paper) or "single"
     skip_solves: bool = False  # predict F on an unchanged set (bench: no gain at 1/128)
     round_tols: tuple = ROUND_TOLS  # decision levels of the rounds (compiled path; (): off)
+    field_level: float = FIELD_LEVEL  # the loosest level with a field where no spring snaps
+    threads: str = "auto"   # FFT operator: "serial", "threaded" or chosen step by step (ThreadChoice)
 
 
 @dataclass
@@ -67,6 +70,8 @@ class CurveResult:
     rounds_exceeded: int = 0
     loads_short: int = 0         # force control: load steps whose moves ran out below the target
     refines: int = 0             # loose decision solves carried on to tol (compiled path)
+    solves_ahead: int = 0        # solves run beside the previous round's field and kept
+    solves_dropped: int = 0      # ... and dropped (an entry in that round, or one in doubt)
     edge_steps: int = 0
     unload_complete: bool = True
     wall_time: float = 0.0
@@ -153,6 +158,9 @@ class ContactState:
         self._op = op.compiled()
         pre = prob.precond
         self._pre = pre.compiled() if pre is not None else pre_data()
+        # the same on one thread (the same buffers): the tasks that snap_rounds runs side by
+        # side when threaded
+        self._op1, self._pre1 = self._op, self._pre
         self._lam_lo = self._row_norm = 0.0
         if isinstance(self._op, FFTData):
             # Bounds for the loose decision rounds (snap_rounds): every C_SS is a principal
@@ -166,10 +174,20 @@ class ContactState:
         self._x0 = np.ascontiguousarray(prob.x0, dtype=float)
         self._f_th = np.ascontiguousarray(prob.f_th, dtype=float)
         self._snap_rounds = self._solve_on_set = None    # compiled entry points (entry_point)
+        # the rounds' work space, kept for the run (a tuple: copies of the state share it)
+        n = self._x0.size
+        self._work = (np.empty((2, 6, n)), np.empty((2, n), dtype=np.int64), np.zeros(n, dtype=np.int8))
+        # a step's guess, its field and the start of the step (read within advance only)
+        self._step_work = (np.empty(n), np.empty(n), np.empty(n), np.empty(n))
         # threads only where convolve could use them: the whole grid's box from THREADED_SIZE
+        # (the field beside the next round's solve alone gained 5 % at 1/128 forced on, and
+        # nothing under the thread choice: 0.29 s either way, 2026-11-28)
         can_thread = (isinstance(self._op, FFTData) and numba.get_num_threads() > 1
                       and self._op.sym_full.shape[0] >= THREADED_SIZE)
-        self.thread_choice = ThreadChoice() if can_thread else None
+        self._overlap = False
+        self.thread_choice = ThreadChoice() if can_thread and prob.threads == "auto" else None
+        if prob.threads != "auto":
+            self.threaded = prob.threads == "threaded"
 
     # What a later step reads besides the problem: saved and restored by tfm.checkpoint.
     CARRIED = ("contact", "F", "u", "_slope", "_uslope", "_last_d", "_set_id", "_base", "_unit",
@@ -193,13 +211,16 @@ class ContactState:
 
     @property
     def threaded(self) -> bool:
-        """Whether the large transforms are spread over the Numba threads (same bits)."""
-        return getattr(self._op, "threads", 1) > 1
+        """Whether the field runs beside the next round's solve and the large transforms are
+        spread over the Numba threads (FFT operator; the same bits either way). On one
+        thread the two tasks take turns: the path is the same."""
+        return self._overlap
 
     @threaded.setter
     def threaded(self, value: bool):
         if isinstance(self._op, FFTData):
             self._op = self._op._replace(threads=numba.get_num_threads() if value else 1)
+            self._overlap = bool(value)
         if self._pre.kind == PRE_FFT:
             self._pre = self._pre._replace(threads=numba.get_num_threads() if value else 1)
 
@@ -207,12 +228,13 @@ class ContactState:
         prob = self.prob
         stats = np.zeros(N_STATS, dtype=np.int64)
         fstats = np.array([out.max_residual, 0.0, 0.0])
-        guess = np.array(guess, dtype=float)             # overwritten by the rounds
-        ug = self.u if u_guess is None else np.ascontiguousarray(u_guess)
+        ug = self.u if u_guess is None else u_guess
         args = (float(d), self.contact, self.F, self.u, guess, ug, u_guess is not None, solved,
                 self._x0, self._f_th, self._op, self._pre, float(prob.tol), int(prob.max_iter),
                 int(prob.max_rounds), prob.snap_rule == "single", float(DECISION_SLACK),
-                np.array(prob.round_tols, dtype=float), self._lam_lo, self._row_norm, stats, fstats)
+                np.array(prob.round_tols, dtype=float), float(prob.field_level), self._lam_lo,
+                self._row_norm, stats, fstats,
+                *self._work, self.threaded, self._op1, self._pre1)
         if self._snap_rounds is None:
             self._snap_rounds = entry_point(snap_rounds, args)
         self._snap_rounds(*args)
@@ -221,7 +243,9 @@ class ContactState:
         out.solver_failures += int(stats[S_FAILURES])
         out.rounds_exceeded += int(stats[S_EXCEEDED])
         out.refines += int(stats[S_REFINES])
-        if stats[S_SOLVES] > 0:
+        out.solves_ahead += int(stats[S_AHEAD])
+        out.solves_dropped += int(stats[S_DROPPED])
+        if stats[S_SOLVES] > 0 and self.skip_solves:
             # the step ended on a real solve: the base of later predictions on this set
             self._base = (self.F.copy(), self.u.copy(), float(d),
                           float(fstats[F_LAST_RES] * fstats[F_LAST_BNORM]))
@@ -276,16 +300,19 @@ class ContactState:
     # ------------------------------------------------------------------ one step
     def advance(self, d: float, k: int, phase: str, out: CurveResult) -> StepRecord:
         prob = self.prob
-        guess, u_guess = self.F, None
+        guess, ug, start_F, start_u = self._step_work       # the rounds overwrite the guess
+        u_guess = None
         if self._slope is not None:
             # F and u = C F are both linear in d: C (F + c dF) = u + c du. The known field
             # is the guess's own only if the guess vanishes off the contact set, i.e. no
             # spring snapped in the last step (a snapped spring's dF is -F/dd).
-            c = d - self._last_d
-            guess = self.F + c * self._slope
-            if not self._slope[~self.contact].any():
-                u_guess = self.u + c * self._uslope
-        start_F, start_u = self.F.copy(), self.u.copy()
+            if extrapolate(self.F, self.u, self._slope, self._uslope, self.contact, d - self._last_d,
+                           guess, ug):
+                u_guess = ug
+        else:
+            np.copyto(guess, self.F)
+        np.copyto(start_F, self.F)
+        np.copyto(start_u, self.u)
         # Skip the solve while the set is unchanged: F = F_base + (d - d_base) x.
         solved = self.skip_solves and self._predict(d)
         choice = self.thread_choice
@@ -306,8 +333,10 @@ class ContactState:
         # dF/dd for the next step's warm start. Exact while the contact set is unchanged
         # (F is linear in d for a fixed set); still a good guess after small changes.
         if self._last_d is not None and d != self._last_d:
-            self._slope = (self.F - start_F) / (d - self._last_d)
-            self._uslope = (self.u - start_u) / (d - self._last_d)
+            if self._slope is None:
+                self._slope, self._uslope = np.empty_like(self.F), np.empty_like(self.u)
+            difference_quotients(self.F, self.u, start_F, start_u, d - self._last_d, self._slope,
+                                 self._uslope)
         else:
             self._slope = self._uslope = None
         self._last_d = d

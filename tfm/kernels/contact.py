@@ -13,16 +13,20 @@ config.ROUND_TOLS, when a rigorous bound shows a tol-solve would decide the same
 carries on from there if not (snap_rounds; the CG state is kept, cg_run).
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
+from numba.extending import overload
 
-from ..config import NUMBA_OPTS
-from .grid import blocked_dot
-from .ops import apply_set, field, precondition, restrict, restrict_pre
+from ..config import NUMBA_OPTS, PARALLEL_OPTS
+from .atomic import atomic_load, atomic_store
+from .fft import fast_len
+from .grid import blocked_dot, grid_reach, index_box
+from .ops import (PRE_FFT, FFTData, apply_set, cached_symbol, field, field_box, field_on_grid, pre_len,
+                  pre_symbol, precondition, restrict, restrict_pre)
 
 # slots of the integer statistics array
 (S_SOLVES, S_ITERS, S_FAILURES, S_ROUNDS, S_SNAPPED, S_ENTERED, S_EXCEEDED, S_LAST_ITERS,
- S_REFINES) = range(9)
-N_STATS = 9
+ S_REFINES, S_AHEAD, S_DROPPED) = range(11)
+N_STATS = 11
 # slots of the float statistics array
 F_MAX_RES, F_LAST_RES, F_LAST_BNORM = range(3)
 
@@ -35,14 +39,17 @@ def cg_workspace(op, pre, idx):
 
 
 @njit(**NUMBA_OPTS)
-def cg_start(op, ws, idx, b, x, Ax0, has_Ax0):
+def cg_start(op, ws, idx, b, x, Ax0, has_Ax0, vecs):
     """CG state for C_SS x = b from the guess x: (r, z, p, Ap, sc) with sc = [r.z, ||r||,
     ||b||, phase]; phase 0: not started, 1: p is the next direction, 2: r was updated last
-    and z, p still have to follow. ``Ax0`` = C x when has_Ax0 saves the first application."""
+    and z, p still have to follow. ``Ax0`` = C x when has_Ax0 saves the first application
+    (it may be r's own row). r, z, p, Ap are the first idx.size entries of the rows of
+    ``vecs`` (4 x N: snap_rounds keeps them for the run)."""
     m = idx.size
-    Ap = np.empty(m)
+    r, z, p, Ap = vecs[0, :m], vecs[1, :m], vecs[2, :m], vecs[3, :m]
     if has_Ax0:
-        r = b - Ax0
+        for k in range(m):
+            r[k] = b[k] - Ax0[k]
     else:
         nonzero = False
         for k in range(m):
@@ -51,11 +58,23 @@ def cg_start(op, ws, idx, b, x, Ax0, has_Ax0):
                 break
         if nonzero:
             apply_set(op, ws[0], idx, x, Ap)
-            r = b - Ap
+            for k in range(m):
+                r[k] = b[k] - Ap[k]
         else:
-            r = b.copy()
+            r[:] = b
     sc = np.array([0.0, np.sqrt(blocked_dot(r, r)), np.sqrt(blocked_dot(b, b)), 0.0])
-    return r, np.empty(m), np.empty(m), Ap, sc
+    return r, z, p, Ap, sc
+
+
+@njit(**NUMBA_OPTS)
+def contact_indices(contact, out):
+    """The springs in contact, in order: the first entries of ``out``."""
+    m = 0
+    for i in range(contact.size):
+        if contact[i]:
+            out[m] = i
+            m += 1
+    return out[:m]
 
 
 @njit(**NUMBA_OPTS)
@@ -70,11 +89,12 @@ def _next_direction(pre, ws, r, z, p, rz, idx):
 
 
 @njit(**NUMBA_OPTS)
-def cg_run(op, pre, ws, state, idx, x, tol, max_iter):
+def cg_run(op, pre, ws, state, idx, x, tol, max_iter, stop=None):
     """Carry PCG on from ``state`` until ||r|| <= tol ||b|| or max_iter iterations in this
     call. A later call with a smaller tol continues the same Krylov sequence (no restart),
-    so a solve stopped early for a decision loses nothing when it must go on. Returns
-    (iterations, converged, relative residual)."""
+    so a solve stopped early for a decision loses nothing when it must go on. ``stop``: an
+    int64 array whose stop[0] another thread may set to end the solve after the iteration
+    in progress (not converged). Returns (iterations, converged, relative residual)."""
     r, z, p, Ap, sc = state
     m = idx.size
     bnorm = sc[2]
@@ -92,6 +112,8 @@ def cg_run(op, pre, ws, state, idx, x, tol, max_iter):
         sc[0] = _next_direction(pre, ws, r, z, p, sc[0], idx)
     sc[3] = 1.0
     for it in range(1, max_iter + 1):
+        if stop is not None and atomic_load(stop, 0) != 0:
+            return it - 1, False, sc[1] / bnorm
         apply_set(op, ws[0], idx, p, Ap)
         pAp = blocked_dot(p, Ap)
         if pAp <= 0.0:
@@ -116,7 +138,7 @@ def solve_on_set(op, pre, idx, b, x, Ax0, has_Ax0, tol, max_iter, u, with_field)
     the first application. With with_field, u (one entry per spring) receives the field
     C x (x on idx, 0 elsewhere). Returns (iterations, converged, relative residual)."""
     ws = cg_workspace(op, pre, idx)
-    state = cg_start(op, ws, idx, b, x, Ax0, has_Ax0)
+    state = cg_start(op, ws, idx, b, x, Ax0, has_Ax0, np.empty((4, idx.size)))
     res = cg_run(op, pre, ws, state, idx, x, tol, max_iter)
     if with_field:
         field(op, ws[0], idx, x, u)
@@ -124,58 +146,175 @@ def solve_on_set(op, pre, idx, b, x, Ax0, has_Ax0, tol, max_iter, u, with_field)
 
 
 @njit(**NUMBA_OPTS)
-def _slacks(d, contact, F, u, rel, with_u):
-    """Decisions ignore violations at the level of the solve's own error: rel times the
-    largest contact force, and rel times the largest of |d| and |u| (|d| alone if not
-    with_u: u is not current)."""
+def _snap_check(idx, Fc, f_th, rel, bf, marks):
+    """The snap rule of Algorithm 1 on the contact set idx with forces Fc: marks[i] = 1 if
+    spring i snaps (F_i above F_th,i by more than the slack, rel times the largest contact
+    force: violations at the level of the solve's own error are ignored), else 0. With a
+    bound bf > 0 on the distance to the tolerance-tol solution, also counts the springs
+    whose fate that distance could change. Visits the contact set only: a solve's decision
+    stop needs F alone. Returns (snapping, unsure, worst snap)."""
     scale_f = 0.0
-    scale_u = abs(d)
-    for i in range(contact.size):
-        if contact[i]:
-            scale_f = max(scale_f, abs(F[i]))
-        if with_u:
-            scale_u = max(scale_u, abs(u[i]))
-    return rel * scale_f, rel * scale_u
+    for k in range(idx.size):
+        scale_f = max(scale_f, abs(Fc[k]))
+    slack_f = rel * scale_f
+    n_over = 0
+    unsure = 0
+    worst = -1
+    worst_k = -1
+    for k in range(idx.size):
+        i = idx[k]
+        marks[i] = 0
+        g = Fc[k] - (f_th[i] + slack_f)
+        if g > 0.0:
+            marks[i] = 1
+            n_over += 1
+            if worst < 0 or Fc[k] - f_th[i] > Fc[worst_k] - f_th[worst]:
+                worst = i
+                worst_k = k
+        if abs(g) <= bf:
+            unsure += 1
+    return n_over, unsure, worst
 
 
 @njit(**NUMBA_OPTS)
-def _classify(d, contact, F, u, x0, f_th, slack_f, slack_u, bf, bu, marks, entries):
-    """marks[i] = 1 if spring i snaps, 2 if it enters, 0 if it stays (Algorithm 1's rules,
-    violations below the slack ignored). With bounds bf, bu > 0 on the distance to the
+def _classify(d, idx, contact, F, u, x0, f_th, rel, bf, bu, marks):
+    """Both rules of Algorithm 1: marks[i] = 1 if spring i snaps (_snap_check), 2 if it
+    enters (x0_i + u_i above d by more than rel times the largest of |d| and |u|), 0 if it
+    stays; idx is the contact set. With bounds bf, bu > 0 on the distance to the
     tolerance-tol solution (forces, displacements), also counts the springs whose fate that
-    distance could change. ``entries`` False: the contact springs only (u not needed).
-    Returns (snapping, entering, unsure, worst snap, worst entry)."""
-    n_over = 0
+    distance could change. Returns (snapping, entering, unsure, worst snap, worst entry)."""
+    n_over, unsure, worst_over = _snap_check(idx, F[idx], f_th, rel, bf, marks)
+    scale_u = abs(d)
+    for i in range(u.size):
+        scale_u = max(scale_u, abs(u[i]))
+    slack_u = rel * scale_u
     n_into = 0
-    unsure = 0
-    worst_over = -1
     worst_into = -1
     for i in range(contact.size):
-        marks[i] = 0
         if contact[i]:
-            g = F[i] - (f_th[i] + slack_f)
-            if g > 0.0:
-                marks[i] = 1
-                n_over += 1
-                if worst_over < 0 or F[i] - f_th[i] > F[worst_over] - f_th[worst_over]:
-                    worst_over = i
-            if abs(g) <= bf:
-                unsure += 1
-        elif entries:
-            g = x0[i] + u[i] - (d + slack_u)
-            if g > 0.0:
-                marks[i] = 2
-                n_into += 1
-                if worst_into < 0 or x0[i] + u[i] > x0[worst_into] + u[worst_into]:
-                    worst_into = i
-            if abs(g) <= bu:
-                unsure += 1
+            continue
+        marks[i] = 0
+        g = x0[i] + u[i] - (d + slack_u)
+        if g > 0.0:
+            marks[i] = 2
+            n_into += 1
+            if worst_into < 0 or x0[i] + u[i] > x0[worst_into] + u[worst_into]:
+                worst_into = i
+        if abs(g) <= bu:
+            unsure += 1
     return n_over, n_into, unsure, worst_over, worst_into
 
 
 @njit(**NUMBA_OPTS)
+def extrapolate(F, u, slope, uslope, contact, c, guess, u_guess):
+    """The warm start of a step: guess = F + c slope, and u_guess = u + c uslope if slope
+    vanishes off the contact set (returned: then u_guess = C guess); one pass instead of
+    NumPy's six whole-grid temporaries (with difference_quotients and no copies that only
+    skip_solves reads, the Python part of a 1/256 curve's steps went from 0.09 to 0.055 s,
+    2026-11-28)."""
+    known = True
+    for i in range(F.size):
+        guess[i] = F[i] + c * slope[i]
+        if slope[i] != 0.0 and not contact[i]:
+            known = False
+    if known:
+        for i in range(F.size):
+            u_guess[i] = u[i] + c * uslope[i]
+    return known
+
+
+@njit(**NUMBA_OPTS)
+def difference_quotients(F, u, F0, u0, dd, slope, uslope):
+    """slope = (F - F0) / dd and uslope = (u - u0) / dd, in place."""
+    for i in range(F.size):
+        slope[i] = (F[i] - F0[i]) / dd
+        uslope[i] = (u[i] - u0[i]) / dd
+
+
+@njit(**NUMBA_OPTS)
+def _next_set(contact, marks, F, x0, d, idx_out, b, Fc):
+    """The next round's contact set if the snaps marked in ``marks`` are the round's only
+    change: its indices (the first entries of idx_out), b = d - x0 and the guess F on it
+    (what the next round builds from guess = F with the snapped springs at 0)."""
+    m = 0
+    for i in range(contact.size):
+        if contact[i] and marks[i] != 1:
+            idx_out[m] = i
+            b[m] = d - x0[i]
+            Fc[m] = F[i]
+            m += 1
+    return idx_out[:m]
+
+
+@njit(**PARALLEL_OPTS)
+def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm, marks,
+                        idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+    """Two tasks on two threads: the field u = C F of this round and its entry decisions,
+    beside the next round's solve to its first decision level on the set idx2 (this round's
+    snaps only). Each task is single-threaded (op1, pre1); they share no buffer: the field
+    has its own, the solve the box buffers, which this round needs no more unless an entry
+    is in doubt (then the caller restricts again). An entry, or one in doubt, makes that
+    solve useless: the field's task then stops it (stop[0]). Results go to counts (n_over,
+    n_into, unsure, worst snap, worst entry), cg_out (iterations, converged, residual) and
+    sc2. (The field is the FFT operator's own: a tuple such as a workspace cannot enter a
+    prange.)"""
+    for t in prange(2):
+        if t == 0:
+            field_on_grid(idx, Fc, op1.n, op1.syms, op1.cut2, op1.spacing, op1.diag[0], op1.src,
+                          op1.col, op1.out, u, op1.threads)
+            c = _classify(d, idx, contact, F, u, x0, f_th, rel, e, row_norm * e, marks)
+            for k in range(5):
+                counts[k] = c[k]
+            if c[1] > 0 or c[2] > 0:
+                atomic_store(stop, 0, 1)
+        else:
+            ws2 = cg_workspace(op1, pre1, idx2)
+            st = cg_start(op1, ws2, idx2, b2, Fc2, b2, False, vecs2)
+            it, conv, res = cg_run(op1, pre1, ws2, st, idx2, Fc2, lev, max_iter, stop)
+            for k in range(4):
+                sc2[k] = st[4][k]
+            cg_out[0] = it
+            cg_out[1] = 1.0 if conv else 0.0
+            cg_out[2] = res
+
+
+def field_beside_solve(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+                       marks, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+    """_field_beside_solve for the FFT operator (compiled code only; snap_rounds calls it
+    with ``overlap`` only, which the caller sets for FFTData alone)."""
+    raise NotImplementedError
+
+
+@overload(field_beside_solve, jit_options=NUMBA_OPTS)
+def _field_beside_solve_impl(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+                             marks, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+    if getattr(op, "instance_class", None) is not FFTData:
+        # never called (no overlap for the other operators), and so not compiled for them
+        def stub(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+                 marks, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+            pass
+        return stub
+
+    def impl(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+             marks, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+        # every symbol the two tasks look up is made here: the typed dicts must not take
+        # insertions from two threads at once
+        n = op.n
+        cached_symbol(op.syms, field_box(n, 2 * grid_reach(n, idx) + 1), op.cut2, op.spacing, op.diag[0])
+        w = index_box(n, idx2)[2]
+        cached_symbol(op.syms, fast_len(2 * w - 1), op.cut2, op.spacing, op.diag[0])
+        if pre1.kind == PRE_FFT:
+            pre_symbol(pre1.psyms, pre1.kinv, pre1.floor, pre_len(w))
+        stop[0] = 0
+        _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+                            marks, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop)
+    return impl
+
+
+@njit(**NUMBA_OPTS)
 def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, op, pre, tol,
-                max_iter, max_rounds, single, slack, round_tols, lam_lo, row_norm, stats, fstats):
+                max_iter, max_rounds, single, slack, round_tols, field_level, lam_lo, row_norm, stats,
+                fstats, work, iwork, marks, overlap, op1, pre1):
     """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
     snap every spring above its threshold and bring in every penetrating one (or only the
     worst, ``single``), until nothing changes or max_rounds is reached.
@@ -189,24 +328,47 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     round's decisions are taken there; the sequence of contact sets is the one tol-solves
     give. Otherwise CG carries on (same Krylov sequence, no restart) to the next level,
     and finally to tol: the last round of every step is a tol-solve. The snap check needs
-    only F, so the field u is computed at a level only once no snap is in doubt. An empty
-    round_tols (or lam_lo <= 0) solves every round to tol.
+    only F (and only the contact set: _snap_check), so the field u is computed at a level
+    only once no snap is in doubt, and where no spring snaps, not at levels above
+    ``field_level``: there the entries are mostly still in doubt. An empty round_tols (or
+    lam_lo <= 0) solves every round to tol.
+
+    Overlap (``overlap``: the FFT operator on two or more threads). Once a round's snaps are
+    certain, the field that decides its entries and the next round's solve to its first
+    level (on the set without the snapped springs) run side by side, each on one thread
+    (op1, pre1: the operator and preconditioner on one thread). The solve is kept when no
+    entry is found, which is nearly always the case while a contact recedes; otherwise it
+    is dropped. It is the computation the next round makes on one thread, so the numbers
+    are the same either way, bit for bit.
 
     ``op`` and ``pre`` are the operator's and the preconditioner's data (tfm.kernels.ops).
-    contact, F, u are updated in place (one entry per spring). ``guess`` is the first
-    solve's guess for F; ``u_guess`` = C guess when has_u_guess. ``solved``: F and u
-    already hold the solution on the current set (the first solve is skipped). Counts go
-    to ``stats``; ``fstats`` holds the largest relative residual of the tol-solves
-    (updated), then the relative residual and ||b|| of the last solve."""
+    ``work`` (2 x 6 x N floats, two sets of: b, the guess, then cg_start's r, z, p, Ap),
+    ``iwork`` (2 x N integers: the contact set; one set for this round, one for the next)
+    and ``marks`` (N int8) are work space kept for the run. contact, F, u are updated in
+    place (one entry per spring). ``guess`` is the first solve's guess for F; ``u_guess``
+    = C guess when has_u_guess. ``solved``: F and u already hold the solution on the
+    current set (the first solve is skipped). Counts go to ``stats``; ``fstats`` holds the
+    largest relative residual of the tol-solves (updated), then the relative residual and
+    ||b|| of the last solve."""
     N = contact.size
-    marks = np.zeros(N, dtype=np.int8)
     loose_ok = round_tols.size > 0 and lam_lo > 0.0 and not single
     first = True
     n_over = n_into = unsure = wo = wi = 0
+    cur = 0                                # which of the two work sets this round uses
+    ahead = False                          # the next round's solve to its first level is done
+    counts = np.zeros(5, dtype=np.int64)
+    stop = np.zeros(1, dtype=np.int64)
+    cg_out = np.zeros(3)
+    sc_ahead = np.zeros(4)
+    sc_m = 0
     while True:
         decided = False
         res = 0.0
-        idx = np.flatnonzero(contact)
+        wk = work[cur]
+        if ahead:
+            idx = iwork[cur][:sc_m]
+        else:
+            idx = contact_indices(contact, iwork[cur])
         if not (first and solved):
             if idx.size == 0:
                 F[:] = 0.0
@@ -215,11 +377,19 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                 fstats[F_LAST_RES] = 0.0
                 fstats[F_LAST_BNORM] = 0.0
             else:
-                b = d - x0[idx]
-                Fc = guess[idx]
-                Ax0 = u_guess[idx] if has_u_guess else b
+                m = idx.size
+                b, Fc, Ax0 = wk[0, :m], wk[1, :m], wk[2, :m]
+                if not ahead:
+                    for k in range(m):
+                        b[k] = d - x0[idx[k]]
+                        Fc[k] = guess[idx[k]]
+                        if has_u_guess:
+                            Ax0[k] = u_guess[idx[k]]
                 ws = cg_workspace(op, pre, idx)
-                state = cg_start(op, ws, idx, b, Fc, Ax0, has_u_guess)
+                if ahead:
+                    state = (wk[2, :m], wk[3, :m], wk[4, :m], wk[5, :m], sc_ahead.copy())
+                else:
+                    state = cg_start(op, ws, idx, b, Fc, Ax0, has_u_guess, wk[2:])
                 bnorm = state[4][2]
                 stats[S_SOLVES] += 1
                 used = 0
@@ -229,30 +399,67 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                     for lev in round_tols:
                         if lev <= tol:
                             break
-                        it, conv, res = cg_run(op, pre, ws, state, idx, Fc, lev, max_iter - used)
+                        if ahead:
+                            # the first level's iterations were run beside the last field
+                            it, conv, res = int(cg_out[0]), cg_out[1] > 0.0, cg_out[2]
+                            ahead = False
+                        else:
+                            it, conv, res = cg_run(op, pre, ws, state, idx, Fc, lev, max_iter - used)
                         used += it
                         if not conv or res <= tol:
                             break          # the tol-solve below reports a failure
                         stops += 1
                         u_fresh = False
-                        F[:] = 0.0
-                        F[idx] = Fc
                         # distance to a tol-solve (the 1e-12 covers CG's recursive-residual
                         # drift), widened by what it can move the slack itself
                         e = (res + tol + 1e-12) * bnorm / lam_lo * (1.0 + slack * tol) * (1.0 + 1e-9)
-                        slack_f, slack_u = _slacks(d, contact, F, u, slack * tol, False)
-                        n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f,
-                                                                   slack_u, e, row_norm * e, marks, False)
+                        n_over, unsure, wo = _snap_check(idx, Fc, f_th, slack * tol, e, marks)
+                        n_into = 0
                         if unsure > 0:
                             continue
+                        if n_over == 0 and stats[S_ROUNDS] > 0:
+                            # no snap after a change this step: nearly always the step's last
+                            # round (standard curve at 1/256: all 285), whose tol-solve needs its
+                            # own field, so a field here would be computed twice; an entry is found
+                            # at tol instead (the same springs, the bound says)
+                            break
+                        if n_over == 0 and lev > field_level:
+                            # entries alone decide this round, and a field this loose leaves
+                            # most of them in doubt (1/256: 179 of 297 at 1e-5): wait
+                            continue
+                        F[:] = 0.0
+                        F[idx] = Fc
                         if has_u_guess and used == 0:
                             u[:] = u_guess     # the guess itself met the level
+                        elif (overlap and n_over > 0 and stats[S_ROUNDS] + 2 < max_rounds
+                              and round_tols[0] > tol and n_over < m):
+                            # the snaps are certain: the next round's solve beside the field
+                            nxt = 1 - cur
+                            wn = work[nxt]
+                            idx2 = _next_set(contact, marks, F, x0, d, iwork[nxt], wn[0], wn[1])
+                            m2 = idx2.size
+                            field_beside_solve(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th,
+                                               slack * tol, e, row_norm, marks, idx2, wn[0, :m2],
+                                               wn[1, :m2], wn[2:], sc_ahead, round_tols[0], max_iter,
+                                               counts, cg_out, stop)
+                            n_over, n_into, unsure, wo, wi = (counts[0], counts[1], counts[2], counts[3],
+                                                              counts[4])
+                            u_fresh = True
+                            if unsure == 0:
+                                decided = True
+                                ahead = n_into == 0
+                                stats[S_AHEAD] += ahead
+                                stats[S_DROPPED] += not ahead
+                                sc_m = m2
+                                break
+                            stats[S_DROPPED] += 1
+                            ws = cg_workspace(op, pre, idx)    # the solve beside used its buffers
+                            continue
                         else:
                             field(op, ws[0], idx, Fc, u)
                         u_fresh = True
-                        slack_f, slack_u = _slacks(d, contact, F, u, slack * tol, True)
-                        n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f,
-                                                                   slack_u, e, row_norm * e, marks, True)
+                        n_over, n_into, unsure, wo, wi = _classify(d, idx, contact, F, u, x0, f_th,
+                                                                   slack * tol, e, row_norm * e, marks)
                         if unsure == 0:
                             # certain: take the decisions, or, if none, end the step at tol
                             decided = n_over > 0 or n_into > 0
@@ -280,15 +487,16 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
         has_u_guess = False
         stats[S_ROUNDS] += 1
         if not decided:
-            slack_f, slack_u = _slacks(d, contact, F, u, slack * tol, True)
-            n_over, n_into, unsure, wo, wi = _classify(d, contact, F, u, x0, f_th, slack_f, slack_u,
-                                                       -1.0, -1.0, marks, True)
+            n_over, n_into, unsure, wo, wi = _classify(d, idx, contact, F, u, x0, f_th, slack * tol,
+                                                       -1.0, -1.0, marks)
         if n_over == 0 and n_into == 0:
             break
         if stats[S_ROUNDS] >= max_rounds:
             stats[S_EXCEEDED] += 1
             break
         guess[:] = F
+        if ahead:
+            cur = 1 - cur                  # the next round's set and solve are in the other set
         if single:
             # the 'single' rule: change only the worst violator (a snap before an entry)
             if n_over > 0:
