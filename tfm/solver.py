@@ -176,7 +176,7 @@ class ContactState:
         self._snap_rounds = self._solve_on_set = None    # compiled entry points (entry_point)
         # the rounds' work space, kept for the run (a tuple: copies of the state share it)
         n = self._x0.size
-        self._work = (np.empty((2, 6, n)), np.empty((2, n), dtype=np.int64), np.zeros(n, dtype=np.int8))
+        self._work = (np.empty((2, 6, n)), np.empty((2, n), dtype=np.int64), np.zeros((2, n), dtype=np.int8))
         # a step's guess, its field and the start of the step (read within advance only)
         self._step_work = (np.empty(n), np.empty(n), np.empty(n), np.empty(n))
         # threads only where convolve could use them: the whole grid's box from THREADED_SIZE
