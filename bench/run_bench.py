@@ -153,8 +153,11 @@ def tfm_whole_process(spacing):
         return _timed(cmd)[0]
 
 
-def ratio_table(repeats=3, with_256_baseline=True):
-    """The issue's ratios: baseline and tfm interleaved, medians over ``repeats`` pairs."""
+def ratio_table(repeats=3, with_256_baseline=True, pairs_256=1, tfm_runs_256=3):
+    """The issue's ratios: baseline and tfm interleaved, medians over ``repeats`` pairs
+    (``pairs_256`` at 1/256, where the baseline takes minutes; there each pair's tfm side
+    is ``tfm_runs_256`` runs, all of which enter the median). Rows: spacing, timing,
+    baseline median, tfm median, ratio, baseline runs, tfm runs."""
     from tfm import Params, simulate
     simulate(Params.from_dict(dict(STANDARD, spacing=1 / 16)))        # compile outside timing
     rows = []
@@ -162,14 +165,15 @@ def ratio_table(repeats=3, with_256_baseline=True):
     for sp, how in cases:
         base, mine = [], []
         skip_base = sp == "1/256" and not with_256_baseline
-        for _ in range(1 if sp == "1/256" else repeats):
+        for _ in range(pairs_256 if sp == "1/256" else repeats):
             if not skip_base:
                 b_in, b_whole = baseline_run(sp)
                 base.append(b_in if how == "in-process" else b_whole)
-            mine.append(tfm_in_process(sp) if how == "in-process" else tfm_whole_process(sp))
+            for _ in range(tfm_runs_256 if sp == "1/256" else 1):
+                mine.append(tfm_in_process(sp) if how == "in-process" else tfm_whole_process(sp))
         mb = statistics.median(base) if base else float("nan")
         mt = statistics.median(mine)
-        rows.append((sp, how, mb, mt, mb / mt, len(mine)))
+        rows.append((sp, how, mb, mt, mb / mt, len(base), len(mine)))
     return rows
 
 
@@ -260,6 +264,8 @@ def main(argv=None):
     ap.add_argument("--no-baseline-256", action="store_true",
                     help="skip the plain SciPy baseline at 1/256 (about 2 min)")
     ap.add_argument("--repeats", type=int, default=3, help="A/B pairs per ratio")
+    ap.add_argument("--pairs-256", type=int, default=1,
+                    help="A/B pairs at 1/256 (each: one baseline run, three tfm runs)")
     args = ap.parse_args(argv)
     print(f"# tfm benchmarks\n\nmachine: {machine()}\n")
     if args.scale:
@@ -271,10 +277,11 @@ def main(argv=None):
         return
     if args.only in (None, "ratios"):
         print("## Against the plain SciPy script (bench/baseline.py), interleaved, medians\n")
-        print("| spacing | timing | baseline s | tfm s | ratio | pairs |")
-        print("|---|---|---|---|---|---|")
-        for sp, how, b, t, ratio, k in ratio_table(args.repeats, not args.no_baseline_256):
-            print(f"| {sp} | {how} | {b:.2f} | {t:.2f} | {ratio:.1f}x | {k} |")
+        print("| spacing | timing | baseline s | tfm s | ratio | baseline runs | tfm runs |")
+        print("|---|---|---|---|---|---|---|")
+        for sp, how, b, t, ratio, kb, kt in ratio_table(args.repeats, not args.no_baseline_256,
+                                                        args.pairs_256):
+            print(f"| {sp} | {how} | {b:.2f} | {t:.2f} | {ratio:.1f}x | {kb} | {kt} |", flush=True)
         print()
     if args.only in (None, "old"):
         print("## Before/after: the old Python engine (tests/reference_engine.py) against tfm, "

@@ -230,7 +230,8 @@ def test_threads_are_used_only_where_they_can_pay():
 
 def test_thread_choice_holds_the_mode_that_was_faster_per_unit_of_work():
     """ThreadChoice alternates the modes for TRIAL steps each, then holds the one with the
-    smaller wall time per unit of work for HOLD steps, and tries again (synthetic times)."""
+    smaller wall time per unit of work for HOLD steps (serial only if faster by BIAS), and
+    tries again (synthetic times)."""
     from tfm.solver import ThreadChoice
 
     def cycle(choice, cost):                  # cost[mode]: seconds per unit of work
@@ -250,6 +251,9 @@ def test_thread_choice_holds_the_mode_that_was_faster_per_unit_of_work():
     modes = cycle(choice, {True: 3.0, False: 2.0})     # the second core got busy
     assert modes[:trial] == [True, False] * ThreadChoice.TRIAL
     assert not any(modes[trial:])
+    # serial ahead by less than BIAS: within the trials' noise, threaded is held
+    modes = cycle(choice, {True: 1.0 + 0.5 * (ThreadChoice.BIAS - 1.0), False: 1.0})
+    assert all(modes[trial:])
 
 
 def test_a_run_switching_modes_gives_the_bits_of_a_serial_run():

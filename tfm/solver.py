@@ -86,7 +86,8 @@ def entry_point(dispatcher, args):
 
 
 class ThreadChoice:
-    """Serial or threaded transforms, chosen from the run's own steps, again and again.
+    """Serial or threaded (the field beside the next round's solve, and transforms split
+    from THREADED_SIZE), chosen from the run's own steps, again and again.
 
     The bits do not depend on the choice, only the time. A timing of a few convolutions at
     start (tfm.kernels.fft.threads_pay) proved a poor guide on the 2-core VM: whole 1/256
@@ -100,10 +101,14 @@ class ThreadChoice:
     curve, one process per run, interleaved (2026-11-24): 1/512 16.1-16.8 s against
     19.3-20.8 s serial and 16.2-25.7 s with the start-up timing's choice; at 1/256 the
     trials cost a little (medians 2.47 s against 2.30 s with the start-up timing, which
-    chose well in those runs, and 2.37 s serial)."""
+    chose well in those runs, and 2.37 s serial). Since the field runs beside the next
+    solve, threaded is the faster mode wherever both cores are free, so serial must be
+    faster by BIAS to be held: 1/256 in one quiet process, 5 runs each (2026-11-28), medians
+    1.609 s with no bias, 1.587 s with 1.1, 1.568 s threaded throughout."""
 
     TRIAL = 4
     HOLD = 48
+    BIAS = 1.1
 
     def __init__(self):
         self.k = 0
@@ -117,7 +122,7 @@ class ThreadChoice:
             return pos % 2 == 0
         if pos == 2 * self.TRIAL:
             (ts, ws), (tt, wt) = self.spent[False], self.spent[True]
-            self.mode = tt * ws < ts * wt          # threaded if faster per unit of work
+            self.mode = tt * ws < self.BIAS * ts * wt     # threaded unless serial is clearly faster
             self.spent = {False: [0.0, 0], True: [0.0, 0]}
         return self.mode
 
