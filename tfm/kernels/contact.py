@@ -275,15 +275,16 @@ def _next_set(contact, pred, F, x0, d, idx_out, b, Fc):
 def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm, marks,
                         pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
     """Two tasks on two threads: the field u = C F of this round and its decisions, beside
-    the next round's solve to its first decision level on the set idx2, the one the
-    predicted changes ``pred`` make (_predict, _next_set). Each task is single-threaded
-    (op1, pre1); they share no buffer: the field has its own, the solve the box buffers,
-    which this round needs again only if the prediction fails (then the caller restricts
-    again). Decisions other than the predicted ones, or in doubt, make that solve useless:
-    the field's task then stops it (stop[0]). Results go to counts (n_over, n_into, unsure,
-    worst snap, worst entry, prediction right), cg_out (iterations, converged, residual)
-    and sc2. (The field is the FFT operator's own: a tuple such as a workspace cannot
-    enter a prange.)"""
+    the start of the next round's solve (to its first decision level) on the set idx2, the
+    one the predicted changes ``pred`` make (_predict, _next_set). Each task is
+    single-threaded (op1, pre1); they share no buffer: the field has its own, the solve the
+    box buffers, which this round needs again only if the prediction fails (then the caller
+    restricts again). When the field's task is done it stops the solve (stop[0]) at its next
+    iteration: decisions other than the predicted ones, or in doubt, make it useless, and
+    otherwise the caller carries it on with both threads. Results go to counts (n_over,
+    n_into, unsure, worst snap, worst entry, prediction right), cg_out (iterations,
+    converged, residual, stopped early) and sc2. (The field is the FFT operator's own: a
+    tuple such as a workspace cannot enter a prange.)"""
     for t in prange(2):
         if t == 0:
             field_on_grid(idx, Fc, op1.n, op1.syms, op1.cut2, op1.spacing, op1.diag[0], op1.src,
@@ -297,8 +298,9 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
                     right = False
                     break
             counts[5] = right
-            if not right:
-                atomic_store(stop, 0, 1)
+            # either way the solve stops at its next iteration: dropped, or carried on by the
+            # caller with both threads on its transforms
+            atomic_store(stop, 0, 1)
         else:
             ws2 = cg_workspace(op1, pre1, idx2)
             st = cg_start(op1, ws2, idx2, b2, Fc2, b2, False, vecs2)
@@ -308,6 +310,7 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
             cg_out[0] = it
             cg_out[1] = 1.0 if conv else 0.0
             cg_out[2] = res
+            cg_out[3] = 1.0 if not conv and atomic_load(stop, 0) != 0 else 0.0   # stopped
 
 
 def field_beside_solve(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
@@ -392,9 +395,9 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     n_over = n_into = unsure = wo = wi = 0
     cur = 0                                # which of the two work sets this round uses
     ahead = False                          # the next round's solve to its first level is done
-    counts = np.zeros(5, dtype=np.int64)
+    counts = np.zeros(6, dtype=np.int64)
     stop = np.zeros(1, dtype=np.int64)
-    cg_out = np.zeros(3)
+    cg_out = np.zeros(4)
     sc_ahead = np.zeros(4)
     sc_m = 0
     while True:
@@ -436,8 +439,13 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                         if lev <= tol:
                             break
                         if ahead:
-                            # the first level's iterations were run beside the last field
+                            # the first level's iterations were begun beside the last field;
+                            # stopped when the field was done, they go on here (the same
+                            # Krylov sequence: cg_run resumes)
                             it, conv, res = int(cg_out[0]), cg_out[1] > 0.0, cg_out[2]
+                            if cg_out[3] > 0.0:
+                                more, conv, res = cg_run(op, pre, ws, state, idx, Fc, lev, max_iter - it)
+                                it += more
                             ahead = False
                         else:
                             it, conv, res = cg_run(op, pre, ws, state, idx, Fc, lev, max_iter - used)
