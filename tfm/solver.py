@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS
+from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS, SKIP_TOL
 from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, S_AHEAD, S_DROPPED,
                               S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS, S_REFINES, S_ROUNDS,
                               S_SNAPPED, S_SOLVES, difference_quotients, extrapolate, snap_rounds,
@@ -40,7 +40,7 @@ class Problem:
     max_iter: int
     max_rounds: int
     snap_rule: str          # "batch" (paper) or "single"
-    skip_solves: bool = False  # predict F on an unchanged set (bench: no gain at 1/128)
+    skip_solves: bool = True   # predict F while the set is unchanged (config.SKIP_TOL)
     round_tols: tuple = ROUND_TOLS  # decision levels of the rounds (compiled path; (): off)
     field_level: float = FIELD_LEVEL  # the loosest level with a field where no spring snaps
     threads: str = "auto"   # FFT operator: "serial", "threaded" or chosen step by step (ThreadChoice)
@@ -156,6 +156,7 @@ class ContactState:
         # response; _set_id counts contact-set changes
         self.skip_solves = prob.skip_solves
         self._set_id = 0
+        self._steps_kept = 0        # steps in a row that changed nothing
         self._base = None
         self._unit = None
         self._unit_set = -1
@@ -195,8 +196,8 @@ class ContactState:
             self.threaded = prob.threads == "threaded"
 
     # What a later step reads besides the problem: saved and restored by tfm.checkpoint.
-    CARRIED = ("contact", "F", "u", "_slope", "_uslope", "_last_d", "_set_id", "_base", "_unit",
-               "_unit_set")
+    CARRIED = ("contact", "F", "u", "_slope", "_uslope", "_last_d", "_set_id", "_steps_kept", "_base",
+               "_unit", "_unit_set")
 
     def carried(self) -> dict:
         """The state a later step reads (arrays, numbers, tuples of them, or None)."""
@@ -257,22 +258,42 @@ class ContactState:
         return (int(stats[S_ROUNDS]), int(stats[S_ITERS]), int(stats[S_SNAPPED]),
                 int(stats[S_ENTERED]))
 
-    def _solve_unit(self):
+    def _solve(self, idx, b, x, Ax0, has_Ax0, tol, u):
+        """solve_on_set on the compiled operator, with the field C x into u."""
+        args = (self._op, self._pre, idx, b, x, Ax0, has_Ax0, float(tol), int(self.prob.max_iter), u, True)
+        if self._solve_on_set is None:
+            self._solve_on_set = entry_point(solve_on_set, args)
+        return self._solve_on_set(*args)
+
+    def _solve_unit(self, tol=None):
         """x with C_SS x = 1 on the contact set (0 off it), its field w = C x on every
-        spring, and ||1 - C_SS x||; warm-started from the last step's dF/dd."""
-        prob = self.prob
+        spring, and ||1 - C_SS x||; warm-started from the last step's dF/dd; to ``tol``
+        relative (the problem's by default)."""
         idx = np.flatnonzero(self.contact)
         x, w = np.zeros(self.F.size), np.zeros(self.F.size)
         if idx.size == 0:
             return x, w, 0.0, 0
         ones = np.ones(idx.size)
         xs = self._slope[idx].copy() if self._slope is not None else np.zeros(idx.size)
-        args = (self._op, self._pre, idx, ones, xs, ones, False, float(prob.tol), int(prob.max_iter), w, True)
-        if self._solve_on_set is None:
-            self._solve_on_set = entry_point(solve_on_set, args)
-        it, conv, res = self._solve_on_set(*args)
+        it, conv, res = self._solve(idx, ones, xs, ones, False, self.prob.tol if tol is None else tol, w)
         x[idx] = xs
         return x, w, res * np.sqrt(idx.size), it
+
+    def _refine_base(self, d, tol) -> int:
+        """F and u at d solved again, from F, to ``tol`` relative: the base of predictions
+        (_predict). Returns the CG iterations."""
+        idx = np.flatnonzero(self.contact)
+        if idx.size == 0:
+            self._base = (self.F.copy(), self.u.copy(), float(d), 0.0)
+            return 0
+        b = d - self.prob.x0[idx]
+        x = self.F[idx]
+        u = np.empty_like(self.u)
+        it, conv, res = self._solve(idx, b, x, self.u[idx], True, tol, u)
+        self.F[idx] = x
+        self.u = u
+        self._base = (self.F.copy(), self.u.copy(), float(d), float(res * np.sqrt(blocked_dot(b, b))))
+        return it
 
     def unit_response(self, out: CurveResult | None = None) -> np.ndarray:
         """dF/dd on the current contact set: the full-grid solution of C_SS x = 1 on the
@@ -327,14 +348,20 @@ class ContactState:
         rounds, iters, snapped, entered = self._rounds(d, guess, u_guess, out, solved)
         if choice is not None:
             choice.record(self.threaded, time.perf_counter() - t0, iters + rounds + 1)
+        self._steps_kept = 0 if snapped or entered else self._steps_kept + 1
         if snapped or entered:
             self._set_id += 1
-        elif self.skip_solves and (self._unit is None or self._unit_set != self._set_id):
-            # the set survived a whole step: its unit response will likely serve the next ones
-            self._unit = self._solve_unit()
+        elif (self.skip_solves and self._steps_kept >= 2
+              and (self._unit is None or self._unit_set != self._set_id)):
+            # the set survived two whole steps: its unit response will likely serve the
+            # next ones (a receding contact has single steps without a snap between its
+            # snaps). A prediction F_base + (d - d_base) x must stay within tol, so both are
+            # solved to SKIP_TOL times tol (at tol, the bound failed at the first step)
+            iters += self._refine_base(d, prob.tol * SKIP_TOL)
+            self._unit = self._solve_unit(prob.tol * SKIP_TOL)
             self._unit_set = self._set_id
             iters += self._unit[3]
-            out.n_solves += 1
+            out.n_solves += 2
         # dF/dd for the next step's warm start. Exact while the contact set is unchanged
         # (F is linear in d for a fixed set); still a good guess after small changes.
         if self._last_d is not None and d != self._last_d:
