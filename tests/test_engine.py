@@ -234,7 +234,7 @@ def test_threads_are_used_only_where_they_can_pay():
 
 def test_thread_choice_holds_the_mode_that_was_faster_per_unit_of_work():
     """ThreadChoice alternates the modes for TRIAL steps each, then holds the one with the
-    smaller wall time per unit of work for HOLD steps (serial only if faster by BIAS), and
+    smaller wall time per unit of work (the median of the pairs' ratios) for HOLD steps, and
     tries again (synthetic times)."""
     from tfm.solver import ThreadChoice
 
@@ -255,8 +255,14 @@ def test_thread_choice_holds_the_mode_that_was_faster_per_unit_of_work():
     modes = cycle(choice, {True: 3.0, False: 2.0})     # the second core got busy
     assert modes[:trial] == [True, False] * ThreadChoice.TRIAL
     assert not any(modes[trial:])
-    # serial ahead by less than BIAS: within the trials' noise, threaded is held
-    modes = cycle(choice, {True: 1.0 + 0.5 * (ThreadChoice.BIAS - 1.0), False: 1.0})
+    # one serial step far cheaper than its neighbours (a step of another kind) does not
+    # turn the choice: the median of the pairs' ratios
+    odd = iter([0.01] + [2.0] * (2 * ThreadChoice.TRIAL + ThreadChoice.HOLD))
+
+    class Odd(dict):
+        def __getitem__(self, mode):
+            return 1.0 if mode else next(odd)
+    modes = cycle(choice, Odd())
     assert all(modes[trial:])
 
 

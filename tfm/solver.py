@@ -9,6 +9,7 @@ The solver knows nothing about files; it returns arrays and flags.
 """
 from __future__ import annotations
 
+import statistics
 import time
 from dataclasses import dataclass, field
 
@@ -89,31 +90,27 @@ class ThreadChoice:
     """Serial or threaded (the field beside the next round's solve, and transforms split
     from THREADED_SIZE), chosen from the run's own steps, again and again.
 
-    The bits do not depend on the choice, only the time. A timing of a few convolutions at
-    start (tfm.kernels.fft.threads_pay) proved a poor guide on the 2-core VM: whole 1/256
-    curves took 2.1 s threaded in some processes and 3.5-4.1 s in others, 2.2-2.3 s serial
-    in all (2026-11-24; the slow runs point to waiting for the OpenMP worker to wake
-    between parallel regions: with OMP_WAIT_POLICY=active, 2.19-2.39 s threaded). So every
-    cycle runs TRIAL steps in each mode, alternating, compares the wall time per unit of
-    work (CG iterations + rounds + 1) and holds the faster mode for HOLD steps, from the
-    first step on (the operator's and the preconditioner's compiled data start on one
-    thread, and no start-up timing is made for the solve). Standard
-    curve, one process per run, interleaved (2026-11-24): 1/512 16.1-16.8 s against
-    19.3-20.8 s serial and 16.2-25.7 s with the start-up timing's choice; at 1/256 the
-    trials cost a little (medians 2.47 s against 2.30 s with the start-up timing, which
-    chose well in those runs, and 2.37 s serial). Since the field runs beside the next
-    solve, threaded is the faster mode wherever both cores are free, so serial must be
-    faster by BIAS to be held: 1/256 in one quiet process, 5 runs each (2026-11-28), medians
-    1.609 s with no bias, 1.587 s with 1.1, 1.568 s threaded throughout."""
+    The bits do not depend on the choice, only the time. Neither mode wins everywhere on
+    the 2-core VM: in its quiet spells the standard 1/256 curve took 1.51-1.52 s threaded
+    against 1.76-1.94 s serial, in others (the same hour, 2026-11-28) 2.27-2.33 s threaded
+    against 1.69-1.80 s serial, when one convolution split over two threads took 0.33 ms
+    against 0.19 ms on one. A timing of a few convolutions at start proved a poor guide
+    (2026-11-24). So every cycle runs TRIAL steps in each mode, alternating, and holds the
+    faster mode for HOLD steps, from the first step on. Faster: the median over the trial's
+    pairs of neighbouring steps (threaded, then serial) of their ratio of wall time per
+    unit of work (CG iterations + rounds + 1). Neighbours are alike, and the median is
+    not moved by one step unlike the rest; the summed times of each mode, used before,
+    held threaded in 6 of 9 cycles of a run in which it cost 0.33 ms a unit of work
+    against 0.19 ms serial (then 1.73-1.75 s, against 2.14 s)."""
 
     TRIAL = 4
     HOLD = 48
-    BIAS = 1.1
 
     def __init__(self):
         self.k = 0
-        self.spent = {False: [0.0, 0], True: [0.0, 0]}
         self.mode = True
+        self._ratios = []
+        self._threaded = None
 
     def next(self) -> bool:
         """The mode of the next step."""
@@ -121,16 +118,19 @@ class ThreadChoice:
         if pos < 2 * self.TRIAL:
             return pos % 2 == 0
         if pos == 2 * self.TRIAL:
-            (ts, ws), (tt, wt) = self.spent[False], self.spent[True]
-            self.mode = tt * ws < self.BIAS * ts * wt     # threaded unless serial is clearly faster
-            self.spent = {False: [0.0, 0], True: [0.0, 0]}
+            if self._ratios:
+                self.mode = statistics.median(self._ratios) < 1.0   # threaded if faster
+            self._ratios = []
         return self.mode
 
     def record(self, threaded: bool, seconds: float, work: int) -> None:
         """The step just taken: its mode, wall time and work."""
         if self.k % (2 * self.TRIAL + self.HOLD) < 2 * self.TRIAL:
-            self.spent[threaded][0] += seconds
-            self.spent[threaded][1] += work
+            per_unit = seconds / max(work, 1)
+            if threaded:
+                self._threaded = per_unit
+            elif self._threaded is not None and per_unit > 0.0:
+                self._ratios.append(self._threaded / per_unit)
         self.k += 1
 
 
