@@ -19,8 +19,8 @@ import numpy as np
 from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS, SKIP_TOL
 from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, S_AHEAD, S_DROPPED,
                               S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS, S_REFINES, S_ROUNDS,
-                              S_SNAPPED, S_SOLVES, difference_quotients, extrapolate, snap_rounds,
-                              solve_on_set)
+                              S_SNAPPED, S_SOLVES, difference_quotients, extrapolate, predicted,
+                              rhs_norm, snap_rounds, solve_on_set)
 from .kernels.fft import THREADED_SIZE
 from .kernels.grid import blocked_dot
 from .kernels.ops import PRE_FFT, FFTData
@@ -315,12 +315,9 @@ class ContactState:
         Fb, ub, db, rb = self._base
         x, w, rx, _ = self._unit
         c = d - db
-        idx = np.flatnonzero(self.contact)
-        bnorm = float(np.sqrt(blocked_dot(d - self.prob.x0[idx], d - self.prob.x0[idx])))
-        if rb + abs(c) * rx > self.prob.tol * bnorm:
+        if rb + abs(c) * rx > self.prob.tol * rhs_norm(self.contact, self._x0, d):
             return False
-        np.add(Fb, c * x, out=self.F)
-        np.add(ub, c * w, out=self.u)
+        predicted(Fb, ub, x, w, c, self.F, self.u)
         return True
 
     # ------------------------------------------------------------------ one step
@@ -328,7 +325,13 @@ class ContactState:
         prob = self.prob
         guess, ug, start_F, start_u = self._step_work       # the rounds overwrite the guess
         u_guess = None
-        if self._slope is not None:
+        np.copyto(start_F, self.F)
+        np.copyto(start_u, self.u)
+        # Skip the solve while the set is unchanged: F = F_base + (d - d_base) x.
+        solved = self.skip_solves and self._predict(d)
+        if solved:                     # no first solve: no guess is read
+            pass
+        elif self._slope is not None:
             # F and u = C F are both linear in d: C (F + c dF) = u + c du. The known field
             # is the guess's own only if the guess vanishes off the contact set, i.e. no
             # spring snapped in the last step (a snapped spring's dF is -F/dd).
@@ -337,10 +340,6 @@ class ContactState:
                 u_guess = ug
         else:
             np.copyto(guess, self.F)
-        np.copyto(start_F, self.F)
-        np.copyto(start_u, self.u)
-        # Skip the solve while the set is unchanged: F = F_base + (d - d_base) x.
-        solved = self.skip_solves and self._predict(d)
         choice = self.thread_choice
         if choice is not None:
             self.threaded = choice.next()

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit, prange
 from numba.extending import overload
 
-from ..config import NUMBA_OPTS, PARALLEL_OPTS
+from ..config import NUMBA_OPTS, PARALLEL_OPTS, REDUCTION_BLOCK
 from .atomic import atomic_load, atomic_store
 from .fft import fast_len
 from .grid import blocked_dot, grid_reach, index_box
@@ -221,6 +221,31 @@ def extrapolate(F, u, slope, uslope, contact, c, guess, u_guess):
         for i in range(F.size):
             u_guess[i] = u[i] + c * uslope[i]
     return known
+
+
+@njit(**NUMBA_OPTS)
+def predicted(Fb, ub, x, w, c, F, u):
+    """F = Fb + c x and u = ub + c w, in place: a step of an unchanged contact set."""
+    for i in range(F.size):
+        F[i] = Fb[i] + c * x[i]
+        u[i] = ub[i] + c * w[i]
+
+
+@njit(**NUMBA_OPTS)
+def rhs_norm(contact, x0, d):
+    """||d - x0|| over the contact set, summed as blocked_dot sums the gathered vector."""
+    total = 0.0
+    acc = 0.0
+    k = 0
+    for i in range(contact.size):
+        if contact[i]:
+            v = d - x0[i]
+            acc += v * v
+            k += 1
+            if k % REDUCTION_BLOCK == 0:
+                total += acc
+                acc = 0.0
+    return np.sqrt(total + acc)
 
 
 @njit(**NUMBA_OPTS)
