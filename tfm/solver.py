@@ -92,9 +92,9 @@ class ThreadChoice:
 
     The bits do not depend on the choice, only the time. Neither mode wins everywhere on
     the 2-core VM: in its quiet spells the standard 1/256 curve took 1.51-1.52 s threaded
-    against 1.76-1.94 s serial, in others (the same hour, 2026-11-28) 2.27-2.33 s threaded
-    against 1.69-1.80 s serial, when one convolution split over two threads took 0.33 ms
-    against 0.19 ms on one. A timing of a few convolutions at start proved a poor guide
+    against 1.76-1.94 s serial, in others (within the same hour, around midnight of
+    2026-11-28) 2.27-2.33 s threaded against 1.69-1.80 s serial, when one convolution split
+    over two threads took 0.33 ms against 0.19 ms on one. A timing of a few convolutions at start proved a poor guide
     (2026-11-24). So every cycle runs TRIAL steps in each mode, alternating, and holds the
     faster mode for HOLD steps, from the first step on. Faster: the median over the trial's
     pairs of neighbouring steps (threaded, then serial) of their ratio of wall time per
