@@ -44,6 +44,9 @@ FIELD_LEVEL = 1e-7
 # contact's 217 steps before its first snap are predicted); 1/128 0.272 s either way;
 # 1/512 within 1 %. Forces within 1.1e-10 of the solved ones, the same contact counts.
 SKIP_TOL = 0.1
+# ... unless SKIP_TOL * tol is below this: a solve cannot reach it in double precision (the
+# solves reach 1e-15 at best: params.MIN_TOL), so the set is solved step by step.
+SKIP_MIN_TOL = 1e-14
 
 
 # Box size P from which the compiled FFT cuts its stages into one part per Numba thread

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS, SKIP_TOL
+from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS, SKIP_MIN_TOL, SKIP_TOL
 from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, S_AHEAD, S_DROPPED,
                               S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS, S_REFINES, S_ROUNDS,
                               S_SNAPPED, S_SOLVES, difference_quotients, extrapolate, predicted,
@@ -350,7 +350,7 @@ class ContactState:
         self._steps_kept = 0 if snapped or entered else self._steps_kept + 1
         if snapped or entered:
             self._set_id += 1
-        elif (self.skip_solves and self._steps_kept >= 2
+        elif (self.skip_solves and self._steps_kept >= 2 and prob.tol * SKIP_TOL >= SKIP_MIN_TOL
               and (self._unit is None or self._unit_set != self._set_id)):
             # the set survived two whole steps: its unit response will likely serve the
             # next ones (a receding contact has single steps without a snap between its
