@@ -94,14 +94,14 @@ class ThreadChoice:
     the 2-core VM: in its quiet spells the standard 1/256 curve took 1.51-1.52 s threaded
     against 1.76-1.94 s serial, in others (within the same hour, around midnight of
     2026-11-28) 2.27-2.33 s threaded against 1.69-1.80 s serial, when one convolution split
-    over two threads took 0.33 ms against 0.19 ms on one. A timing of a few convolutions at start proved a poor guide
-    (2026-11-24). So every cycle runs TRIAL steps in each mode, alternating, and holds the
-    faster mode for HOLD steps, from the first step on. Faster: the median over the trial's
-    pairs of neighbouring steps (threaded, then serial) of their ratio of wall time per
-    unit of work (CG iterations + rounds + 1). Neighbours are alike, and the median is
-    not moved by one step unlike the rest; the summed times of each mode, used before,
-    held threaded in 6 of 9 cycles of a run in which it cost 0.33 ms a unit of work
-    against 0.19 ms serial (then 1.73-1.75 s, against 2.14 s)."""
+    over two threads took 0.33 ms against 0.19 ms on one. A timing of a few convolutions at
+    start proved a poor guide (2026-11-24). So every cycle runs TRIAL steps in each mode,
+    alternating, and holds the faster mode for HOLD steps, from the first step on. Faster:
+    the median over the trial's pairs of neighbouring steps (threaded, then serial) of
+    their ratio of wall time per unit of work (CG iterations + rounds + 1). Neighbours are
+    alike, and the median is not moved by one step unlike the rest; the summed times of
+    each mode, used before, held threaded in 6 of 9 cycles of a run in which it cost 0.33
+    ms a unit of work against 0.19 ms serial (then 1.73-1.75 s, against 2.14 s)."""
 
     TRIAL = 4
     HOLD = 48
@@ -288,10 +288,8 @@ class ContactState:
             return 0
         b = d - self.prob.x0[idx]
         x = self.F[idx]
-        u = np.empty_like(self.u)
-        it, conv, res = self._solve(idx, b, x, self.u[idx], True, tol, u)
+        it, conv, res = self._solve(idx, b, x, self.u[idx], True, tol, self.u)   # C x into u
         self.F[idx] = x
-        self.u = u
         self._base = (self.F.copy(), self.u.copy(), float(d), float(res * np.sqrt(blocked_dot(b, b))))
         return it
 
@@ -329,16 +327,14 @@ class ContactState:
         np.copyto(start_u, self.u)
         # Skip the solve while the set is unchanged: F = F_base + (d - d_base) x.
         solved = self.skip_solves and self._predict(d)
-        if solved:                     # no first solve: no guess is read
-            pass
-        elif self._slope is not None:
+        if not solved and self._slope is not None:     # (a predicted step reads no guess)
             # F and u = C F are both linear in d: C (F + c dF) = u + c du. The known field
             # is the guess's own only if the guess vanishes off the contact set, i.e. no
             # spring snapped in the last step (a snapped spring's dF is -F/dd).
             if extrapolate(self.F, self.u, self._slope, self._uslope, self.contact, d - self._last_d,
                            guess, ug):
                 u_guess = ug
-        else:
+        elif not solved:
             np.copyto(guess, self.F)
         choice = self.thread_choice
         if choice is not None:

@@ -257,7 +257,7 @@ def difference_quotients(F, u, F0, u0, dd, slope, uslope):
 
 
 @njit(**NUMBA_OPTS)
-def _predict(contact, marks, x0, u_guess, d, rel, entries, pred):
+def _likely_changes(contact, marks, x0, u_guess, d, rel, entries, pred):
     """The round's changes as they will likely be: its snaps (``marks`` on the contact set,
     already certain) and, with ``entries``, the springs off it that the field of the step's
     guess, u_guess, puts into the flat (the slack as _classify's). pred[i] = 1, 2 or 0 as
@@ -283,7 +283,7 @@ def _predict(contact, marks, x0, u_guess, d, rel, entries, pred):
 
 @njit(**NUMBA_OPTS)
 def _next_set(contact, pred, F, x0, d, idx_out, b, Fc):
-    """The next round's contact set if the changes in ``pred`` (_predict) are the round's:
+    """The next round's contact set if the changes in ``pred`` (_likely_changes) are the round's:
     its indices (the first entries of idx_out), b = d - x0 and the guess F on it (what the
     next round builds from guess = F with the snapped springs at 0; F is 0 off the set)."""
     m = 0
@@ -301,7 +301,7 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
                         pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
     """Two tasks on two threads: the field u = C F of this round and its decisions, beside
     the start of the next round's solve (to its first decision level) on the set idx2, the
-    one the predicted changes ``pred`` make (_predict, _next_set). Each task is
+    one the predicted changes ``pred`` make (_likely_changes, _next_set). Each task is
     single-threaded (op1, pre1); they share no buffer: the field has its own, the solve the
     box buffers, which this round needs again only if the prediction fails (then the caller
     restricts again). When the field's task is done it stops the solve (stop[0]) at its next
@@ -338,7 +338,7 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
             cg_out[3] = 1.0 if not conv and atomic_load(stop, 0) != 0 else 0.0   # stopped
 
 
-def field_beside_solve(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+def field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
                        marks, pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
     """_field_beside_solve for the FFT operator (compiled code only; snap_rounds calls it
     with ``overlap`` only, which the caller sets for FFTData alone)."""
@@ -346,16 +346,16 @@ def field_beside_solve(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, r
 
 
 @overload(field_beside_solve, jit_options=NUMBA_OPTS)
-def _field_beside_solve_impl(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
                              marks, pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
     if getattr(op, "instance_class", None) is not FFTData:
         # never called (no overlap for the other operators), and so not compiled for them
-        def stub(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+        def stub(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
                  marks, pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
             pass
         return stub
 
-    def impl(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+    def impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
              marks, pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
         # every symbol the two tasks look up is made here: the typed dicts must not take
         # insertions from two threads at once
@@ -398,7 +398,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     level run side by side, each on one thread (op1, pre1: the operator and preconditioner
     on one thread). The solve is on the set the round's changes will likely make: the
     certain snaps, and in a step's first round the entries that the field of the step's
-    guess predicts (_predict). It is kept when the field's decisions are those, which is
+    guess predicts (_likely_changes). It is kept when the field's decisions are those, which is
     nearly always the case while a contact recedes, else stopped and dropped. It is the
     computation the next round makes on one thread, so the numbers are the same either
     way, bit for bit.
@@ -503,7 +503,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                         m2 = 0
                         if (overlap and not (has_u_guess and used == 0) and stats[S_ROUNDS] + 2 < max_rounds
                                 and round_tols[0] > tol
-                                and _predict(contact, marks, x0, u_guess, d, slack * tol,
+                                and _likely_changes(contact, marks, x0, u_guess, d, slack * tol,
                                              has_u_guess and stats[S_ROUNDS] == 0, pred) > 0):
                             # the next round's set as predicted: the certain snaps, and in a
                             # step's first round the entries that its guess's field makes
@@ -515,7 +515,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                             # (right in 601 of 608 snapping rounds and 70 % of the loading
                             # steps' first rounds at 1/256)
                             idx2 = iwork[nxt][:m2]
-                            field_beside_solve(op, op1, pre1, ws, idx, Fc, u, d, contact, F, x0, f_th,
+                            field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
                                                slack * tol, e, row_norm, marks, pred, idx2, wn[0, :m2],
                                                wn[1, :m2], wn[2:], sc_ahead, round_tols[0], max_iter,
                                                counts, cg_out, stop)
