@@ -54,6 +54,13 @@ def test_whole_curve_matches_dense_reference_at_1_64(threads, skip):
     assert (out.solves_ahead > 0) == (threads == "threaded")
 
 
+def test_a_mistyped_thread_mode_is_refused():
+    prob, _ = build_problem(Params.from_dict(dict(STANDARD, spacing="1/16")))
+    prob.threads = "threads"
+    with pytest.raises(ValueError, match="Problem.threads: must be 'auto', 'serial' or 'threaded'"):
+        ContactState(prob)
+
+
 def test_the_field_beside_the_next_solve_gives_the_serial_curve_bit_for_bit():
     """The whole standard curve at 1/64, serial and threaded: the same forces and fields at
     every step, bit for bit; most rounds of the receding contact ran their solve beside the

@@ -190,6 +190,8 @@ class ContactState:
         # nothing under the thread choice: 0.29 s either way, 2026-11-28)
         can_thread = (isinstance(self._op, FFTData) and numba.get_num_threads() > 1
                       and self._op.sym_full.shape[0] >= THREADED_SIZE)
+        if prob.threads not in ("auto", "serial", "threaded"):
+            raise ValueError(f"Problem.threads: must be 'auto', 'serial' or 'threaded', got {prob.threads!r}")
         self._overlap = False
         self.thread_choice = ThreadChoice() if can_thread and prob.threads == "auto" else None
         if prob.threads != "auto":
