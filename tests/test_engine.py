@@ -249,8 +249,8 @@ def test_thread_choice_holds_the_mode_that_was_faster_per_unit_of_work():
         modes = []
         for k in range(2 * choice.TRIAL + choice.HOLD):
             mode = choice.next()
-            work = 5 + k % 3                 # steps of unequal work
-            choice.record(mode, cost[mode] * work, work)
+            iters = 3 + k % 3                # steps of unequal work (+ 1 round + 1)
+            choice.record(mode, cost[mode] * (iters + 2), iters, 1)
             modes.append(mode)
         return modes
 
@@ -271,6 +271,38 @@ def test_thread_choice_holds_the_mode_that_was_faster_per_unit_of_work():
             return 1.0 if mode else next(odd)
     modes = cycle(choice, Odd())
     assert all(modes[trial:])
+    # steps without a solve (predicted) do the same in both modes: they neither take a
+    # trial's place nor count, however their times fall
+    choice = ThreadChoice()
+    modes = []
+    for k in range(2 * ThreadChoice.TRIAL):
+        mode = choice.next()
+        choice.record(mode, 1.0 if mode else 0.1, 0, 1)       # serial looks 10x faster
+        assert choice.next() == mode                           # the same trial slot again
+        choice.record(mode, 1.0 if mode else 2.0, 4, 1)        # a solve: threaded is faster
+        modes.append(mode)
+    assert modes == [True, False] * ThreadChoice.TRIAL
+    assert choice.next() is True
+
+
+def test_entry_guess_is_used_while_it_holds_and_probed_otherwise():
+    """EntryGuess: a step's first round predicts entries from its guess while at least RATE
+    of the recent predictions held; after a run of failures only every PROBE-th step tries,
+    and predictions that hold again turn it back on."""
+    from tfm.solver import EntryGuess
+
+    g = EntryGuess()
+    assert g.use()                                   # no evidence yet: try
+    for _ in range(10):
+        g.record(0, 1)                               # dropped, step after step
+    uses = [g.use() for _ in range(3 * EntryGuess.PROBE)]
+    probes = [k for k, u in enumerate(uses) if u]
+    assert len(probes) == 3 and np.all(np.diff(probes) == EntryGuess.PROBE)   # probes only
+    g.record(0, 0)                                   # a step that predicted nothing: no evidence
+    assert [g.use() for _ in range(EntryGuess.PROBE)].count(True) == 1
+    for _ in range(30):
+        g.record(1, 0)                               # the probes hold again
+    assert g.use()
 
 
 def test_a_run_switching_modes_gives_the_bits_of_a_serial_run():

@@ -18,7 +18,8 @@ import numpy as np
 
 from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS, SKIP_MIN_TOL, SKIP_TOL
 from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, S_AHEAD, S_DROPPED,
-                              S_ENTERED, S_EXCEEDED, S_FAILURES, S_ITERS, S_REFINES, S_ROUNDS,
+                              S_ENTERED, S_EXCEEDED, S_FAILURES, S_GUESS_DROPPED, S_GUESS_KEPT,
+                              S_ITERS, S_REFINES, S_ROUNDS,
                               S_SNAPPED, S_SOLVES, difference_quotients, extrapolate, predicted,
                               rhs_norm, snap_rounds, solve_on_set)
 from .kernels.fft import THREADED_SIZE
@@ -101,7 +102,14 @@ class ThreadChoice:
     their ratio of wall time per unit of work (CG iterations + rounds + 1). Neighbours are
     alike, and the median is not moved by one step unlike the rest; the summed times of
     each mode, used before, held threaded in 6 of 9 cycles of a run in which it cost 0.33
-    ms a unit of work against 0.19 ms serial (then 1.73-1.75 s, against 2.14 s)."""
+    ms a unit of work against 0.19 ms serial (then 1.73-1.75 s, against 2.14 s).
+
+    Only steps with CG iterations count, in the trials and in the hold: a step predicted
+    without a solve does the same in both modes, so its ratio is noise. At 1/512 such
+    steps filled 4 of the 10 trials, whose coin-toss choices then held through parts of
+    the cascade: 13.1-14.8 s against 11.8-13.4 s forced threaded (2026-11-29). For the same
+    reason a new phase (loading, unloading) starts a new cycle (``restart``): the last
+    loading trial, at 1/512 a near tie, held serial into the cascade."""
 
     TRIAL = 4
     HOLD = 48
@@ -109,6 +117,12 @@ class ThreadChoice:
     def __init__(self):
         self.k = 0
         self.mode = True
+        self._ratios = []
+        self._threaded = None
+
+    def restart(self) -> None:
+        """A new trial from the next step on (steps of another kind follow)."""
+        self.k = 0
         self._ratios = []
         self._threaded = None
 
@@ -123,15 +137,47 @@ class ThreadChoice:
             self._ratios = []
         return self.mode
 
-    def record(self, threaded: bool, seconds: float, work: int) -> None:
-        """The step just taken: its mode, wall time and work."""
+    def record(self, threaded: bool, seconds: float, iters: int, rounds: int) -> None:
+        """The step just taken: its mode, wall time, CG iterations and rounds."""
+        if iters == 0:
+            return                          # no solve: the modes do the same
         if self.k % (2 * self.TRIAL + self.HOLD) < 2 * self.TRIAL:
-            per_unit = seconds / max(work, 1)
+            per_unit = seconds / (iters + rounds + 1)
             if threaded:
                 self._threaded = per_unit
             elif self._threaded is not None and per_unit > 0.0:
                 self._ratios.append(self._threaded / per_unit)
         self.k += 1
+
+
+class EntryGuess:
+    """Whether a step's first round predicts its entries from the field of the step's guess
+    (snap_rounds' ``guess_entries``), judged by how such predictions fared in this run.
+
+    The solve run beside the field on the predicted set is kept only if every decision is
+    as predicted. The extrapolated field overshoots at the contact's edge, so while loading
+    it brings in a few springs too many: exact at 1/256 in 59 % of the loading steps, at
+    1/512 in 4 % (40 extra springs on a ring of about 190, 2026-11-29). A dropped solve
+    costs the field its second thread; a kept one saves most of a solve. So the guess is
+    used while at least RATE of the recent ones held (counts decayed by DECAY per step that
+    tried), and tried every PROBE steps otherwise."""
+
+    RATE = 0.25
+    DECAY = 0.9
+    PROBE = 16
+
+    def __init__(self):
+        self.kept = self.dropped = 0.0
+        self.k = 0
+
+    def use(self) -> bool:
+        self.k += 1
+        return (self.kept + 1.0) / (self.kept + self.dropped + 2.0) >= self.RATE or self.k % self.PROBE == 0
+
+    def record(self, kept: int, dropped: int) -> None:
+        if kept + dropped:
+            self.kept = self.DECAY * self.kept + kept
+            self.dropped = self.DECAY * self.dropped + dropped
 
 
 class ContactState:
@@ -193,6 +239,8 @@ class ContactState:
         if prob.threads not in ("auto", "serial", "threaded"):
             raise ValueError(f"Problem.threads: must be 'auto', 'serial' or 'threaded', got {prob.threads!r}")
         self._overlap = False
+        self.entry_guess = EntryGuess()
+        self._phase = None           # of the last step (a new phase: a new thread trial)
         self.thread_choice = ThreadChoice() if can_thread and prob.threads == "auto" else None
         if prob.threads != "auto":
             self.threaded = prob.threads == "threaded"
@@ -242,7 +290,8 @@ class ContactState:
                 int(prob.max_rounds), prob.snap_rule == "single", float(DECISION_SLACK),
                 np.array(prob.round_tols, dtype=float), float(prob.field_level), self._lam_lo,
                 self._row_norm, stats, fstats,
-                *self._work, self.threaded, self._op1, self._pre1)
+                *self._work, self.threaded, self.threaded and self.entry_guess.use(), self._op1,
+                self._pre1)
         if self._snap_rounds is None:
             self._snap_rounds = entry_point(snap_rounds, args)
         self._snap_rounds(*args)
@@ -253,6 +302,7 @@ class ContactState:
         out.refines += int(stats[S_REFINES])
         out.solves_ahead += int(stats[S_AHEAD])
         out.solves_dropped += int(stats[S_DROPPED])
+        self.entry_guess.record(int(stats[S_GUESS_KEPT]), int(stats[S_GUESS_DROPPED]))
         if stats[S_SOLVES] > 0 and self.skip_solves:
             # the step ended on a real solve: the base of later predictions on this set
             self._base = (self.F.copy(), self.u.copy(), float(d),
@@ -340,11 +390,13 @@ class ContactState:
             np.copyto(guess, self.F)
         choice = self.thread_choice
         if choice is not None:
+            if phase != self._phase:
+                choice.restart()
             self.threaded = choice.next()
             t0 = time.perf_counter()
         rounds, iters, snapped, entered = self._rounds(d, guess, u_guess, out, solved)
         if choice is not None:
-            choice.record(self.threaded, time.perf_counter() - t0, iters + rounds + 1)
+            choice.record(self.threaded, time.perf_counter() - t0, iters, rounds)
         self._steps_kept = 0 if snapped or entered else self._steps_kept + 1
         if snapped or entered:
             self._set_id += 1
@@ -369,6 +421,7 @@ class ContactState:
         else:
             self._slope = self._uslope = None
         self._last_d = d
+        self._phase = phase
         if (self.contact & prob.edge).any():
             out.edge_steps += 1
         out.solver_iters += iters

@@ -25,8 +25,8 @@ from .ops import (PRE_FFT, FFTData, apply_set, cached_symbol, field, field_box, 
 
 # slots of the integer statistics array
 (S_SOLVES, S_ITERS, S_FAILURES, S_ROUNDS, S_SNAPPED, S_ENTERED, S_EXCEEDED, S_LAST_ITERS,
- S_REFINES, S_AHEAD, S_DROPPED) = range(11)
-N_STATS = 11
+ S_REFINES, S_AHEAD, S_DROPPED, S_GUESS_KEPT, S_GUESS_DROPPED) = range(13)
+N_STATS = 13
 # slots of the float statistics array
 F_MAX_RES, F_LAST_RES, F_LAST_BNORM = range(3)
 
@@ -374,7 +374,7 @@ def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
 @njit(**NUMBA_OPTS)
 def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, op, pre, tol,
                 max_iter, max_rounds, single, slack, round_tols, field_level, lam_lo, row_norm, stats,
-                fstats, work, iwork, flags, overlap, op1, pre1):
+                fstats, work, iwork, flags, overlap, guess_entries, op1, pre1):
     """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
     snap every spring above its threshold and bring in every penetrating one (or only the
     worst, ``single``), until nothing changes or max_rounds is reached.
@@ -398,8 +398,10 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     level run side by side, each on one thread (op1, pre1: the operator and preconditioner
     on one thread). The solve is on the set the round's changes will likely make: the
     certain snaps, and in a step's first round the entries that the field of the step's
-    guess predicts (_likely_changes). It is kept when the field's decisions are those, which is
-    nearly always the case while a contact recedes, else stopped and dropped. It is the
+    guess predicts (_likely_changes; only with ``guess_entries``: S_GUESS_KEPT and
+    S_GUESS_DROPPED count how those fared). It is kept when the field's decisions are
+    those, which is nearly always the case while a contact recedes, else stopped and
+    dropped. It is the
     computation the next round makes on one thread, so the numbers are the same either
     way, bit for bit.
 
@@ -501,10 +503,11 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                         nxt = 1 - cur
                         wn = work[nxt]
                         m2 = 0
+                        entries = guess_entries and has_u_guess and stats[S_ROUNDS] == 0
                         if (overlap and not (has_u_guess and used == 0) and stats[S_ROUNDS] + 2 < max_rounds
                                 and round_tols[0] > tol
                                 and _likely_changes(contact, marks, x0, u_guess, d, slack * tol,
-                                             has_u_guess and stats[S_ROUNDS] == 0, pred) > 0):
+                                                    entries, pred) > 0):
                             # the next round's set as predicted: the certain snaps, and in a
                             # step's first round the entries that its guess's field makes
                             m2 = _next_set(contact, pred, F, x0, d, iwork[nxt], wn[0], wn[1]).size
@@ -524,6 +527,9 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                             ahead = counts[5] > 0
                             stats[S_AHEAD] += ahead
                             stats[S_DROPPED] += not ahead
+                            if entries:
+                                stats[S_GUESS_KEPT] += ahead
+                                stats[S_GUESS_DROPPED] += not ahead
                             if not ahead:
                                 ws = cg_workspace(op, pre, idx)    # the solve beside used its buffers
                             u_fresh = True
