@@ -193,6 +193,42 @@ def test_unit_response_solves_c_ss_x_equals_one():
         assert np.allclose(state.F, F0 - 1e-4 * x, rtol=0, atol=1e-9 * np.abs(F0).max())
 
 
+def test_a_set_kept_two_steps_gets_its_base_and_unit_response_from_the_compiled_step():
+    """prepare_predictions (at the end of a step's rounds): once a set has survived two
+    steps, the base F at d and x with C_SS x = 1 match the dense solves, and the steps that
+    follow on the set are predicted from them (no solve), matching the dense F too."""
+    p = Params.from_dict(dict(STANDARD, spacing="1/32", max_indent=0.02, step=2e-3, tol=1e-12))
+    prob, layout = build_problem(p)
+    state, out = ContactState(prob), CurveResult()
+    for k, d in enumerate((-0.005, -0.01, -0.02)):
+        state.advance(d, k, "load", out)
+    C = dense_compliance(layout, kernel_spec(p, layout))
+    prepared_at = None
+    for k, d in enumerate(-0.02 + 1e-6 * np.arange(1, 6), start=3):   # tiny unloading moves
+        solves = out.n_solves
+        rec = state.advance(d, k, "unload", out)
+        assert rec.n_snapped == rec.n_entered == 0                     # the set holds
+        if prepared_at is None and state._unit is not None and state._unit_set == state._set_id:
+            prepared_at = d
+            idx = np.flatnonzero(state.contact)
+            C_SS = C[np.ix_(idx, idx)]
+            x, w, rx, _ = state._unit
+            ref = np.linalg.solve(C_SS, np.ones(idx.size))
+            assert np.all(x[~state.contact] == 0.0)
+            # solved to tol * SKIP_TOL = 1e-13 on a system of condition ~10^2
+            assert np.allclose(x[idx], ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+            assert np.allclose(w, C[:, idx] @ x[idx], rtol=0, atol=1e-10 * np.abs(w).max())
+            Fb, ub, db, rb = state._base
+            assert db == d and rx < 1e-12 * np.sqrt(idx.size) and rb >= 0.0
+        elif prepared_at is not None:
+            assert out.n_solves == solves                               # predicted, not solved
+        idx = np.flatnonzero(state.contact)
+        F_ref = np.linalg.solve(C[np.ix_(idx, idx)], d - prob.x0[idx])
+        # tol 1e-12 (solved) or a prediction within it, at condition ~10^2
+        assert np.allclose(state.F[idx], F_ref, rtol=0, atol=1e-9 * np.abs(F_ref).max())
+    assert prepared_at is not None and prepared_at < d
+
+
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs 2 Numba threads")
 @pytest.mark.parametrize("skip", [False, True])
 def test_compiled_engine_is_bitwise_independent_of_thread_count(skip):

@@ -53,7 +53,8 @@ def _dispatchers():
             yield value
 
 
-# compiled only for force control (tfm.solver.ContactState.unit_response)
+# compiled only for force control (tfm.solver.ContactState.unit_response; displacement control
+# prepares its predictions inside snap_rounds: prepare_predictions)
 FORCE_CONTROL_ONLY = ("solve_on_set",)
 
 

@@ -17,13 +17,13 @@ import numba
 import numpy as np
 
 from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS, SKIP_MIN_TOL, SKIP_TOL
-from .kernels.contact import (F_LAST_BNORM, F_LAST_RES, F_MAX_RES, N_STATS, S_AHEAD, S_DROPPED,
-                              S_ENTERED, S_EXCEEDED, S_FAILURES, S_GUESS_DROPPED, S_GUESS_KEPT,
-                              S_ITERS, S_REFINES, S_ROUNDS,
+from .kernels.contact import (F_BASE_RES, F_LAST_BNORM, F_LAST_RES, F_MAX_RES, F_UNIT_RES, N_FSTATS,
+                              N_STATS, S_AHEAD, S_DROPPED, S_ENTERED, S_EXCEEDED, S_FAILURES,
+                              S_GUESS_DROPPED, S_GUESS_KEPT, S_ITERS, S_PREPARED, S_REFINES, S_ROUNDS,
+                              S_UNIT_ITERS,
                               S_SNAPPED, S_SOLVES, difference_quotients, extrapolate, predicted,
                               rhs_norm, snap_rounds, solve_on_set)
 from .kernels.fft import THREADED_SIZE
-from .kernels.grid import blocked_dot
 from .kernels.ops import PRE_FFT, FFTData
 from .operators import pre_data
 
@@ -231,6 +231,8 @@ class ContactState:
         self._work = (np.empty((2, 6, n)), np.empty((2, n), dtype=np.int64), np.zeros((2, n), dtype=np.int8))
         # a step's guess, its field and the start of the step (read within advance only)
         self._step_work = (np.empty(n), np.empty(n), np.empty(n), np.empty(n))
+        # prepare_predictions' output: the base F and u, the unit response x and its field
+        self._prep = np.empty((4, n))
         # threads only where convolve could use them: the whole grid's box from THREADED_SIZE
         # (the field beside the next round's solve alone gained 5 % at 1/128 forced on, and
         # nothing under the thread choice: 0.29 s either way, 2026-11-28)
@@ -280,18 +282,24 @@ class ContactState:
         if self._pre.kind == PRE_FFT:
             self._pre = self._pre._replace(threads=numba.get_num_threads() if value else 1)
 
-    def _rounds(self, d, guess, u_guess, out, solved=False):
+    def _rounds(self, d, guess, u_guess, out, solved=False, prepare=False):
+        """The rounds of step d (snap_rounds); with ``prepare``, a step that changes
+        nothing ends with the base and unit response of its set (prepare_predictions,
+        to SKIP_TOL times tol)."""
         prob = self.prob
         stats = np.zeros(N_STATS, dtype=np.int64)
-        fstats = np.array([out.max_residual, 0.0, 0.0])
+        fstats = np.zeros(N_FSTATS)
+        fstats[F_MAX_RES] = out.max_residual
         ug = self.u if u_guess is None else u_guess
+        slope = self._slope if self._slope is not None else self.F
         args = (float(d), self.contact, self.F, self.u, guess, ug, u_guess is not None, solved,
                 self._x0, self._f_th, self._op, self._pre, float(prob.tol), int(prob.max_iter),
                 int(prob.max_rounds), prob.snap_rule == "single", float(DECISION_SLACK),
                 np.array(prob.round_tols, dtype=float), float(prob.field_level), self._lam_lo,
                 self._row_norm, stats, fstats,
                 *self._work, self.threaded, self.threaded and self.entry_guess.use(), self._op1,
-                self._pre1)
+                self._pre1, float(prob.tol * SKIP_TOL) if prepare else 0.0, slope, self._slope is not None,
+                self._prep)
         if self._snap_rounds is None:
             self._snap_rounds = entry_point(snap_rounds, args)
         self._snap_rounds(*args)
@@ -303,7 +311,12 @@ class ContactState:
         out.solves_ahead += int(stats[S_AHEAD])
         out.solves_dropped += int(stats[S_DROPPED])
         self.entry_guess.record(int(stats[S_GUESS_KEPT]), int(stats[S_GUESS_DROPPED]))
-        if stats[S_SOLVES] > 0 and self.skip_solves:
+        if stats[S_PREPARED]:
+            base_F, base_u, x, w = (a.copy() for a in self._prep)
+            self._base = (base_F, base_u, float(d), float(fstats[F_BASE_RES]))
+            self._unit = (x, w, float(fstats[F_UNIT_RES]), int(stats[S_UNIT_ITERS]))
+            self._unit_set = self._set_id
+        elif stats[S_SOLVES] > 0 and self.skip_solves:
             # the step ended on a real solve: the base of later predictions on this set
             self._base = (self.F.copy(), self.u.copy(), float(d),
                           float(fstats[F_LAST_RES] * fstats[F_LAST_BNORM]))
@@ -330,20 +343,6 @@ class ContactState:
         it, conv, res = self._solve(idx, ones, xs, ones, False, self.prob.tol if tol is None else tol, w)
         x[idx] = xs
         return x, w, res * np.sqrt(idx.size), it
-
-    def _refine_base(self, d, tol) -> int:
-        """F and u at d solved again, from F, to ``tol`` relative: the base of predictions
-        (_predict). Returns the CG iterations."""
-        idx = np.flatnonzero(self.contact)
-        if idx.size == 0:
-            self._base = (self.F.copy(), self.u.copy(), float(d), 0.0)
-            return 0
-        b = d - self.prob.x0[idx]
-        x = self.F[idx]
-        it, conv, res = self._solve(idx, b, x, self.u[idx], True, tol, self.u)   # C x into u
-        self.F[idx] = x
-        self._base = (self.F.copy(), self.u.copy(), float(d), float(res * np.sqrt(blocked_dot(b, b))))
-        return it
 
     def unit_response(self, out: CurveResult | None = None) -> np.ndarray:
         """dF/dd on the current contact set: the full-grid solution of C_SS x = 1 on the
@@ -394,23 +393,19 @@ class ContactState:
                 choice.restart()
             self.threaded = choice.next()
             t0 = time.perf_counter()
-        rounds, iters, snapped, entered = self._rounds(d, guess, u_guess, out, solved)
+        # If this step keeps the set, it has survived two whole steps: its unit response
+        # will likely serve the next ones (a receding contact has single steps without a
+        # snap between its snaps). A prediction F_base + (d - d_base) x must stay within
+        # tol, so both are solved to SKIP_TOL times tol (at tol, the bound failed at the
+        # first step), at the end of the step's rounds (prepare_predictions)
+        prepare = (self.skip_solves and self._steps_kept >= 1 and prob.tol * SKIP_TOL >= SKIP_MIN_TOL
+                   and (self._unit is None or self._unit_set != self._set_id))
+        rounds, iters, snapped, entered = self._rounds(d, guess, u_guess, out, solved, prepare)
         if choice is not None:
             choice.record(self.threaded, time.perf_counter() - t0, iters, rounds)
         self._steps_kept = 0 if snapped or entered else self._steps_kept + 1
         if snapped or entered:
             self._set_id += 1
-        elif (self.skip_solves and self._steps_kept >= 2 and prob.tol * SKIP_TOL >= SKIP_MIN_TOL
-              and (self._unit is None or self._unit_set != self._set_id)):
-            # the set survived two whole steps: its unit response will likely serve the
-            # next ones (a receding contact has single steps without a snap between its
-            # snaps). A prediction F_base + (d - d_base) x must stay within tol, so both are
-            # solved to SKIP_TOL times tol (at tol, the bound failed at the first step)
-            iters += self._refine_base(d, prob.tol * SKIP_TOL)
-            self._unit = self._solve_unit(prob.tol * SKIP_TOL)
-            self._unit_set = self._set_id
-            iters += self._unit[3]
-            out.n_solves += 2
         # dF/dd for the next step's warm start. Exact while the contact set is unchanged
         # (F is linear in d for a fixed set); still a good guess after small changes.
         if self._last_d is not None and d != self._last_d:

@@ -25,10 +25,11 @@ from .ops import (PRE_FFT, FFTData, apply_set, cached_symbol, field, field_box, 
 
 # slots of the integer statistics array
 (S_SOLVES, S_ITERS, S_FAILURES, S_ROUNDS, S_SNAPPED, S_ENTERED, S_EXCEEDED, S_LAST_ITERS,
- S_REFINES, S_AHEAD, S_DROPPED, S_GUESS_KEPT, S_GUESS_DROPPED) = range(13)
-N_STATS = 13
+ S_REFINES, S_AHEAD, S_DROPPED, S_GUESS_KEPT, S_GUESS_DROPPED, S_PREPARED, S_UNIT_ITERS) = range(15)
+N_STATS = 15
 # slots of the float statistics array
-F_MAX_RES, F_LAST_RES, F_LAST_BNORM = range(3)
+F_MAX_RES, F_LAST_RES, F_LAST_BNORM, F_BASE_RES, F_UNIT_RES = range(5)
+N_FSTATS = 5
 
 
 @njit(**NUMBA_OPTS)
@@ -374,7 +375,8 @@ def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
 @njit(**NUMBA_OPTS)
 def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, op, pre, tol,
                 max_iter, max_rounds, single, slack, round_tols, field_level, lam_lo, row_norm, stats,
-                fstats, work, iwork, flags, overlap, guess_entries, op1, pre1):
+                fstats, work, iwork, flags, overlap, guess_entries, op1, pre1, prepare_tol, slope,
+                has_slope, prep):
     """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
     snap every spring above its threshold and bring in every penetrating one (or only the
     worst, ``single``), until nothing changes or max_rounds is reached.
@@ -414,7 +416,11 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     = C guess when has_u_guess. ``solved``: F and u already hold the solution on the
     current set (the first solve is skipped). Counts go to ``stats``; ``fstats`` holds the
     largest relative residual of the tol-solves (updated), then the relative residual and
-    ||b|| of the last solve."""
+    ||b|| of the last solve.
+
+    With ``prepare_tol`` > 0, a step that changes nothing ends with what predicts the next
+    steps on its set (tfm.solver.ContactState._predict): prepare_predictions. Here, not
+    from Python, so that a run loads one compiled library the fewer."""
     N = contact.size
     marks, pred = flags[0], flags[1]       # the round's changes, and as predicted
     loose_ok = round_tols.size > 0 and lam_lo > 0.0 and not single
@@ -598,3 +604,50 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                 contact[i] = True
         stats[S_SNAPPED] += n_over
         stats[S_ENTERED] += n_into
+    if prepare_tol > 0.0 and stats[S_SNAPPED] == 0 and stats[S_ENTERED] == 0:
+        prepare_predictions(d, contact, F, u, x0, op, pre, prepare_tol, max_iter, slope, has_slope,
+                            prep, work[0], iwork[0], stats, fstats)
+
+
+@njit(**NUMBA_OPTS)
+def prepare_predictions(d, contact, F, u, x0, op, pre, tol, max_iter, slope, has_slope, prep, wk,
+                        iw, stats, fstats):
+    """The base and the unit response of the contact set, to ``tol``: F and u at d solved
+    again from F (the base: prep[0], prep[1], and into F and u), and x with C_SS x = 1 on
+    the set (prep[2], 0 off it; warm-started from ``slope`` if has_slope) with its field w
+    = C x (prep[3]). F(d') = F + (d' - d) x while the set holds. Residuals: ||b - C_SS F||
+    (fstats[F_BASE_RES]) and ||1 - C_SS x|| (F_UNIT_RES); two solves and their iterations
+    counted in stats (S_UNIT_ITERS: the unit response's)."""
+    idx = contact_indices(contact, iw)
+    m = idx.size
+    it = it2 = 0
+    res = res2 = 0.0
+    prep[2][:] = 0.0
+    if m == 0:
+        prep[3][:] = 0.0
+    else:
+        b, x, Ax0 = wk[0, :m], wk[1, :m], wk[2, :m]
+        for k in range(m):
+            b[k] = d - x0[idx[k]]
+            x[k] = F[idx[k]]
+            Ax0[k] = u[idx[k]]
+        it, conv, r = solve_on_set(op, pre, idx, b, x, Ax0, True, tol, max_iter, u, True)
+        for k in range(m):
+            F[idx[k]] = x[k]
+        res = r * np.sqrt(blocked_dot(b, b))
+        ones, xs = wk[0, :m], wk[1, :m]
+        ones[:] = 1.0
+        for k in range(m):
+            xs[k] = slope[idx[k]] if has_slope else 0.0
+        it2, conv2, r2 = solve_on_set(op, pre, idx, ones, xs, ones, False, tol, max_iter, prep[3], True)
+        for k in range(m):
+            prep[2][idx[k]] = xs[k]
+        res2 = r2 * np.sqrt(m)
+    prep[0][:] = F
+    prep[1][:] = u
+    fstats[F_BASE_RES] = res
+    fstats[F_UNIT_RES] = res2
+    stats[S_ITERS] += it + it2
+    stats[S_UNIT_ITERS] = it2
+    stats[S_SOLVES] += 2
+    stats[S_PREPARED] = 1
