@@ -19,7 +19,7 @@ from numba.extending import overload
 from ..config import NUMBA_OPTS, PARALLEL_OPTS, REDUCTION_BLOCK
 from .atomic import atomic_load, atomic_store
 from .fft import fast_len
-from .grid import blocked_dot, grid_reach, index_box
+from .grid import abs_max, blocked_dot, grid_reach, index_box
 from .ops import (PRE_FFT, FFTData, apply_set, cached_symbol, field, field_box, field_on_grid, pre_len,
                   pre_symbol, precondition, restrict, restrict_pre)
 
@@ -154,10 +154,7 @@ def _snap_check(idx, Fc, f_th, rel, bf, marks):
     bound bf > 0 on the distance to the tolerance-tol solution, also counts the springs
     whose fate that distance could change. Visits the contact set only: a solve's decision
     stop needs F alone. Returns (snapping, unsure, worst snap)."""
-    scale_f = 0.0
-    for k in range(idx.size):
-        scale_f = max(scale_f, abs(Fc[k]))
-    slack_f = rel * scale_f
+    slack_f = rel * abs_max(Fc[:idx.size])
     n_over = 0
     unsure = 0
     worst = -1
@@ -185,10 +182,7 @@ def _classify(d, idx, contact, F, u, x0, f_th, rel, bf, bu, marks):
     tolerance-tol solution (forces, displacements), also counts the springs whose fate that
     distance could change. Returns (snapping, entering, unsure, worst snap, worst entry)."""
     n_over, unsure, worst_over = _snap_check(idx, F[idx], f_th, rel, bf, marks)
-    scale_u = abs(d)
-    for i in range(u.size):
-        scale_u = max(scale_u, abs(u[i]))
-    slack_u = rel * scale_u
+    slack_u = rel * max(abs(d), abs_max(u))
     n_into = 0
     worst_into = -1
     for i in range(contact.size):
@@ -265,10 +259,7 @@ def _likely_changes(contact, marks, x0, u_guess, d, rel, entries, pred):
     marks; returns how many change. Only a guess: _field_beside_solve checks it."""
     slack_u = 0.0
     if entries:
-        scale_u = abs(d)
-        for i in range(u_guess.size):
-            scale_u = max(scale_u, abs(u_guess[i]))
-        slack_u = rel * scale_u
+        slack_u = rel * max(abs(d), abs_max(u_guess))
     n = 0
     for i in range(contact.size):
         pred[i] = 0
