@@ -94,8 +94,9 @@ def cg_run(op, pre, ws, state, idx, x, tol, max_iter, stop=None):
     """Carry PCG on from ``state`` until ||r|| <= tol ||b|| or max_iter iterations in this
     call. A later call with a smaller tol continues the same Krylov sequence (no restart),
     so a solve stopped early for a decision loses nothing when it must go on. ``stop``: an
-    int64 array whose stop[0] another thread may set to end the solve after the iteration
-    in progress (not converged). Returns (iterations, converged, relative residual)."""
+    int64 array whose stop[0] another thread may set to end the solve after the part of the
+    iteration in progress (the application and update, or the preconditioning; not
+    converged). Returns (iterations, converged, relative residual)."""
     r, z, p, Ap, sc = state
     m = idx.size
     bnorm = sc[2]
@@ -128,6 +129,11 @@ def cg_run(op, pre, ws, state, idx, x, tol, max_iter, stop=None):
         if sc[1] <= tol * bnorm:
             sc[3] = 2.0
             return it, True, sc[1] / bnorm
+        if stop is not None and atomic_load(stop, 0) != 0:
+            # checked here too, not only before the application: the thread that set it
+            # waits for this one, on average half a segment (2026-11-29)
+            sc[3] = 2.0
+            return it, False, sc[1] / bnorm
         sc[0] = _next_direction(pre, ws, r, z, p, sc[0], idx)
     return max_iter, False, sc[1] / bnorm
 
