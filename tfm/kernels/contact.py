@@ -283,7 +283,8 @@ def _likely_changes(contact, marks, x0, u_guess, d, rel, entries, pred):
 def _next_set(contact, pred, F, x0, d, idx_out, b, Fc):
     """The next round's contact set if the changes in ``pred`` (_likely_changes) are the round's:
     its indices (the first entries of idx_out), b = d - x0 and the guess F on it (what the
-    next round builds from guess = F with the snapped springs at 0; F is 0 off the set)."""
+    next round builds: this round's F with the snapped springs at 0, or after a first round
+    that only brings springs in, the step's guess; either is 0 off the set)."""
     m = 0
     for i in range(contact.size):
         if (contact[i] and pred[i] != 1) or pred[i] == 2:
@@ -296,9 +297,10 @@ def _next_set(contact, pred, F, x0, d, idx_out, b, Fc):
 
 @njit(**PARALLEL_OPTS)
 def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm, marks,
-                        pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+                        pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
     """Two tasks on two threads: the field u = C F of this round and its decisions, beside
-    the start of the next round's solve (to its first decision level) on the set idx2, the
+    the start of the next round's solve (to its first decision level; Ax2 = C Fc2 when
+    has_Ax2 saves its first application) on the set idx2, the
     one the predicted changes ``pred`` make (_likely_changes, _next_set). Each task is
     single-threaded (op1, pre1); they share no buffer: the field has its own, the solve the
     box buffers, which this round needs again only if the prediction fails (then the caller
@@ -326,7 +328,7 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
             atomic_store(stop, 0, 1)
         else:
             ws2 = cg_workspace(op1, pre1, idx2)
-            st = cg_start(op1, ws2, idx2, b2, Fc2, b2, False, vecs2)
+            st = cg_start(op1, ws2, idx2, b2, Fc2, Ax2, has_Ax2, vecs2)
             it, conv, res = cg_run(op1, pre1, ws2, st, idx2, Fc2, lev, max_iter, stop)
             for k in range(4):
                 sc2[k] = st[4][k]
@@ -337,7 +339,7 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
 
 
 def field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-                       marks, pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+                       marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
     """_field_beside_solve for the FFT operator (compiled code only; snap_rounds calls it
     with ``overlap`` only, which the caller sets for FFTData alone)."""
     raise NotImplementedError
@@ -345,16 +347,16 @@ def field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, 
 
 @overload(field_beside_solve, jit_options=NUMBA_OPTS)
 def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-                             marks, pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+                             marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
     if getattr(op, "instance_class", None) is not FFTData:
         # never called (no overlap for the other operators), and so not compiled for them
         def stub(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-                 marks, pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+                 marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
             pass
         return stub
 
     def impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-             marks, pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+             marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
         # every symbol the two tasks look up is made here: the typed dicts must not take
         # insertions from two threads at once
         n = op.n
@@ -365,7 +367,7 @@ def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
             pre_symbol(pre1.psyms, pre1.kinv, pre1.floor, pre_len(w))
         stop[0] = 0
         _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-                            marks, pred, idx2, b2, Fc2, vecs2, sc2, lev, max_iter, counts, cg_out, stop)
+                            marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop)
     return impl
 
 
@@ -410,7 +412,8 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     and ``flags`` (2 x N int8: the changes, and the changes predicted) are work space kept
     for the run. contact, F, u are updated in
     place (one entry per spring). ``guess`` is the first solve's guess for F; ``u_guess``
-    = C guess when has_u_guess. ``solved``: F and u already hold the solution on the
+    = C guess when has_u_guess. A first round that only brings springs in is followed by a
+    round from that same guess (0 on the new springs), not from its own F. ``solved``: F and u already hold the solution on the
     current set (the first solve is skipped). Counts go to ``stats``; ``fstats`` holds the
     largest relative residual of the tol-solves (updated), then the relative residual and
     ||b|| of the last solve.
@@ -506,6 +509,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                         nxt = 1 - cur
                         wn = work[nxt]
                         m2 = 0
+                        from_guess = False
                         entries = guess_entries and has_u_guess and stats[S_ROUNDS] == 0
                         if (overlap and not (has_u_guess and used == 0) and stats[S_ROUNDS] + 2 < max_rounds
                                 and round_tols[0] > tol
@@ -513,7 +517,12 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                                                     entries, pred) > 0):
                             # the next round's set as predicted: the certain snaps, and in a
                             # step's first round the entries that its guess's field makes
-                            m2 = _next_set(contact, pred, F, x0, d, iwork[nxt], wn[0], wn[1]).size
+                            from_guess = has_u_guess and stats[S_ROUNDS] == 0 and n_over == 0
+                            m2 = _next_set(contact, pred, guess if from_guess else F, x0, d, iwork[nxt],
+                                           wn[0], wn[1]).size
+                            if from_guess:
+                                for k in range(m2):
+                                    wn[2, k] = u_guess[iwork[nxt][k]]
                         if has_u_guess and used == 0:
                             u[:] = u_guess     # the guess itself met the level
                         elif m2 > 0:
@@ -523,8 +532,8 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                             idx2 = iwork[nxt][:m2]
                             field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
                                                slack * tol, e, row_norm, marks, pred, idx2, wn[0, :m2],
-                                               wn[1, :m2], wn[2:], sc_ahead, round_tols[0], max_iter,
-                                               counts, cg_out, stop)
+                                               wn[1, :m2], wn[2, :m2], from_guess, wn[2:], sc_ahead,
+                                               round_tols[0], max_iter, counts, cg_out, stop)
                             n_over, n_into, unsure, wo, wi = (counts[0], counts[1], counts[2], counts[3],
                                                               counts[4])
                             ahead = counts[5] > 0
@@ -570,7 +579,6 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                 stats[S_ITERS] += used
                 stats[S_LAST_ITERS] = used
         first = False
-        has_u_guess = False
         stats[S_ROUNDS] += 1
         if not decided:
             n_over, n_into, unsure, wo, wi = _classify(d, idx, contact, F, u, x0, f_th, slack * tol,
@@ -580,7 +588,13 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
         if stats[S_ROUNDS] >= max_rounds:
             stats[S_EXCEEDED] += 1
             break
-        guess[:] = F
+        # After a first round that only brings springs in, the next starts from the step's
+        # own guess (0 on the new springs, its field u_guess known): as few iterations to
+        # tol as from this round's F (7 at 1/256), without an application to start, and
+        # computable before this round ends. Otherwise from F, the snapped springs at 0.
+        has_u_guess = has_u_guess and stats[S_ROUNDS] == 1 and n_over == 0 and not single
+        if not has_u_guess:
+            guess[:] = F
         if ahead:
             cur = 1 - cur                  # the next round's set and solve are in the other set
         if single:
