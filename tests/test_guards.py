@@ -255,7 +255,11 @@ def test_the_memory_estimate_bounds_the_measured_peak(extent):
     assert runtime <= guards.BASELINE_BYTES
     predicted = est - est_small
     mib = 2 ** 20
-    assert grown <= predicted <= 3 * grown + 4 * mib, (grown / mib, predicted / mib)
+    # 2 MiB below: the same code's growth at 257^2 varied by 2 MiB from run to run (20.5 to
+    # 22.6 MiB, and 21.7 to 23.7 MiB after the predictions moved into the compiled step,
+    # whose 513^2 growth stayed at 91.5-91.7 MiB: a fixed cost, not one per spring;
+    # 2026-11-29). Above, a factor 3 and 4 MiB of allocator noise.
+    assert grown <= predicted + 2 * mib and predicted <= 3 * grown + 4 * mib, (grown / mib, predicted / mib)
 
 
 # ---- strict numbers ---------------------------------------------------------------------

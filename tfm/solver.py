@@ -231,8 +231,6 @@ class ContactState:
         self._work = (np.empty((2, 6, n)), np.empty((2, n), dtype=np.int64), np.zeros((2, n), dtype=np.int8))
         # a step's guess, its field and the start of the step (read within advance only)
         self._step_work = (np.empty(n), np.empty(n), np.empty(n), np.empty(n))
-        # prepare_predictions' output: the base F and u, the unit response x and its field
-        self._prep = np.empty((4, n))
         # threads only where convolve could use them: the whole grid's box from THREADED_SIZE
         # (the field beside the next round's solve alone gained 5 % at 1/128 forced on, and
         # nothing under the thread choice: 0.29 s either way, 2026-11-28)
@@ -292,6 +290,14 @@ class ContactState:
         fstats[F_MAX_RES] = out.max_residual
         ug = self.u if u_guess is None else u_guess
         slope = self._slope if self._slope is not None else self.F
+        # prepare_predictions' output (base F and u; unit response x and its field), kept
+        # as the new _base and _unit: allocated only when asked for, after the old ones (of
+        # an earlier set) are let go, and in two blocks, so that a new base alone frees the
+        # old one (one block held 2 N floats more at the peak)
+        if prepare:
+            self._base = self._unit = None
+        shape = (2, self.F.size) if prepare else (2, 0)
+        base, unit = np.empty(shape), np.empty(shape)
         args = (float(d), self.contact, self.F, self.u, guess, ug, u_guess is not None, solved,
                 self._x0, self._f_th, self._op, self._pre, float(prob.tol), int(prob.max_iter),
                 int(prob.max_rounds), prob.snap_rule == "single", float(DECISION_SLACK),
@@ -299,7 +305,7 @@ class ContactState:
                 self._row_norm, stats, fstats,
                 *self._work, self.threaded, self.threaded and self.entry_guess.use(), self._op1,
                 self._pre1, float(prob.tol * SKIP_TOL) if prepare else 0.0, slope, self._slope is not None,
-                self._prep)
+                base, unit)
         if self._snap_rounds is None:
             self._snap_rounds = entry_point(snap_rounds, args)
         self._snap_rounds(*args)
@@ -312,9 +318,8 @@ class ContactState:
         out.solves_dropped += int(stats[S_DROPPED])
         self.entry_guess.record(int(stats[S_GUESS_KEPT]), int(stats[S_GUESS_DROPPED]))
         if stats[S_PREPARED]:
-            base_F, base_u, x, w = (a.copy() for a in self._prep)
-            self._base = (base_F, base_u, float(d), float(fstats[F_BASE_RES]))
-            self._unit = (x, w, float(fstats[F_UNIT_RES]), int(stats[S_UNIT_ITERS]))
+            self._base = (base[0], base[1], float(d), float(fstats[F_BASE_RES]))
+            self._unit = (unit[0], unit[1], float(fstats[F_UNIT_RES]), int(stats[S_UNIT_ITERS]))
             self._unit_set = self._set_id
         elif stats[S_SOLVES] > 0 and self.skip_solves:
             # the step ended on a real solve: the base of later predictions on this set

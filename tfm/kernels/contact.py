@@ -375,7 +375,7 @@ def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
 def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, op, pre, tol,
                 max_iter, max_rounds, single, slack, round_tols, field_level, lam_lo, row_norm, stats,
                 fstats, work, iwork, flags, overlap, guess_entries, op1, pre1, prepare_tol, slope,
-                has_slope, prep):
+                has_slope, base, unit):
     """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
     snap every spring above its threshold and bring in every penetrating one (or only the
     worst, ``single``), until nothing changes or max_rounds is reached.
@@ -617,25 +617,25 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
         stats[S_ENTERED] += n_into
     if prepare_tol > 0.0 and stats[S_SNAPPED] == 0 and stats[S_ENTERED] == 0:
         prepare_predictions(d, contact, F, u, x0, op, pre, prepare_tol, max_iter, slope, has_slope,
-                            prep, work[0], iwork[0], stats, fstats)
+                            base, unit, work[0], iwork[0], stats, fstats)
 
 
 @njit(**NUMBA_OPTS)
-def prepare_predictions(d, contact, F, u, x0, op, pre, tol, max_iter, slope, has_slope, prep, wk,
-                        iw, stats, fstats):
+def prepare_predictions(d, contact, F, u, x0, op, pre, tol, max_iter, slope, has_slope, base, unit,
+                        wk, iw, stats, fstats):
     """The base and the unit response of the contact set, to ``tol``: F and u at d solved
-    again from F (the base: prep[0], prep[1], and into F and u), and x with C_SS x = 1 on
-    the set (prep[2], 0 off it; warm-started from ``slope`` if has_slope) with its field w
-    = C x (prep[3]). F(d') = F + (d' - d) x while the set holds. Residuals: ||b - C_SS F||
+    again from F (the base: base[0], base[1], and into F and u), and x with C_SS x = 1 on
+    the set (unit[0], 0 off it; warm-started from ``slope`` if has_slope) with its field
+    w = C x (unit[1]). F(d') = F + (d' - d) x while the set holds. Residuals: ||b - C_SS F||
     (fstats[F_BASE_RES]) and ||1 - C_SS x|| (F_UNIT_RES); two solves and their iterations
     counted in stats (S_UNIT_ITERS: the unit response's)."""
     idx = contact_indices(contact, iw)
     m = idx.size
     it = it2 = 0
     res = res2 = 0.0
-    prep[2][:] = 0.0
+    unit[0][:] = 0.0
     if m == 0:
-        prep[3][:] = 0.0
+        unit[1][:] = 0.0
     else:
         b, x, Ax0 = wk[0, :m], wk[1, :m], wk[2, :m]
         for k in range(m):
@@ -650,12 +650,12 @@ def prepare_predictions(d, contact, F, u, x0, op, pre, tol, max_iter, slope, has
         ones[:] = 1.0
         for k in range(m):
             xs[k] = slope[idx[k]] if has_slope else 0.0
-        it2, conv2, r2 = solve_on_set(op, pre, idx, ones, xs, ones, False, tol, max_iter, prep[3], True)
+        it2, conv2, r2 = solve_on_set(op, pre, idx, ones, xs, ones, False, tol, max_iter, unit[1], True)
         for k in range(m):
-            prep[2][idx[k]] = xs[k]
+            unit[0][idx[k]] = xs[k]
         res2 = r2 * np.sqrt(m)
-    prep[0][:] = F
-    prep[1][:] = u
+    base[0][:] = F
+    base[1][:] = u
     fstats[F_BASE_RES] = res
     fstats[F_UNIT_RES] = res2
     stats[S_ITERS] += it + it2
