@@ -642,7 +642,13 @@ def prepare_predictions(d, contact, F, u, x0, op, pre, tol, max_iter, slope, has
             b[k] = d - x0[idx[k]]
             x[k] = F[idx[k]]
             Ax0[k] = u[idx[k]]
-        it, conv, r = solve_on_set(op, pre, idx, b, x, Ax0, True, tol, max_iter, u, True)
+        # the calls and array types of snap_rounds' own solves, whose compiled code they
+        # share (solve_on_set here, with its own vectors, cost the first run 11 s more
+        # compilation: 62 s against 51 s, 2026-11-29)
+        ws = cg_workspace(op, pre, idx)
+        it, conv, r = cg_run(op, pre, ws, cg_start(op, ws, idx, b, x, Ax0, True, wk[2:]), idx, x, tol,
+                             max_iter)
+        field(op, ws[0], idx, x, u)
         for k in range(m):
             F[idx[k]] = x[k]
         res = r * np.sqrt(blocked_dot(b, b))
@@ -650,7 +656,9 @@ def prepare_predictions(d, contact, F, u, x0, op, pre, tol, max_iter, slope, has
         ones[:] = 1.0
         for k in range(m):
             xs[k] = slope[idx[k]] if has_slope else 0.0
-        it2, conv2, r2 = solve_on_set(op, pre, idx, ones, xs, ones, False, tol, max_iter, unit[1], True)
+        it2, conv2, r2 = cg_run(op, pre, ws, cg_start(op, ws, idx, ones, xs, ones, False, wk[2:]), idx, xs,
+                                tol, max_iter)
+        field(op, ws[0], idx, xs, unit[1])
         for k in range(m):
             unit[0][idx[k]] = xs[k]
         res2 = r2 * np.sqrt(m)
