@@ -20,9 +20,8 @@ from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS, SKIP_MIN_TOL, SKIP_
 from .kernels.contact import (F_BASE_RES, F_LAST_BNORM, F_LAST_RES, F_MAX_RES, F_UNIT_RES, N_FSTATS,
                               N_STATS, S_AHEAD, S_DROPPED, S_ENTERED, S_EXCEEDED, S_FAILURES,
                               S_GUESS_DROPPED, S_GUESS_KEPT, S_ITERS, S_PREPARED, S_REFINES, S_ROUNDS,
-                              S_UNIT_ITERS,
-                              S_SNAPPED, S_SOLVES, difference_quotients, extrapolate, predicted,
-                              rhs_norm, snap_rounds, solve_on_set)
+                              S_SNAPPED, S_SOLVES, S_UNIT_ITERS, difference_quotients, extrapolate,
+                              predicted, rhs_norm, snap_rounds, solve_on_set)
 from .kernels.fft import THREADED_SIZE
 from .kernels.ops import PRE_FFT, FFTData
 from .operators import pre_data
@@ -289,7 +288,7 @@ class ContactState:
         fstats = np.zeros(N_FSTATS)
         fstats[F_MAX_RES] = out.max_residual
         ug = self.u if u_guess is None else u_guess
-        slope = self._slope if self._slope is not None else self.F
+        slope = self._slope if self._slope is not None else self.F     # (unread without a slope)
         # prepare_predictions' output (base F and u; unit response x and its field), kept
         # as the new _base and _unit: allocated only when asked for, after the old ones (of
         # an earlier set) are let go, and in two blocks, so that a new base alone frees the
@@ -328,24 +327,20 @@ class ContactState:
         return (int(stats[S_ROUNDS]), int(stats[S_ITERS]), int(stats[S_SNAPPED]),
                 int(stats[S_ENTERED]))
 
-    def _solve(self, idx, b, x, Ax0, has_Ax0, tol, u):
-        """solve_on_set on the compiled operator, with the field C x into u."""
-        args = (self._op, self._pre, idx, b, x, Ax0, has_Ax0, float(tol), int(self.prob.max_iter), u, True)
-        if self._solve_on_set is None:
-            self._solve_on_set = entry_point(solve_on_set, args)
-        return self._solve_on_set(*args)
-
-    def _solve_unit(self, tol=None):
+    def _solve_unit(self):
         """x with C_SS x = 1 on the contact set (0 off it), its field w = C x on every
-        spring, and ||1 - C_SS x||; warm-started from the last step's dF/dd; to ``tol``
-        relative (the problem's by default)."""
+        spring, and ||1 - C_SS x||; warm-started from the last step's dF/dd."""
+        prob = self.prob
         idx = np.flatnonzero(self.contact)
         x, w = np.zeros(self.F.size), np.zeros(self.F.size)
         if idx.size == 0:
             return x, w, 0.0, 0
         ones = np.ones(idx.size)
         xs = self._slope[idx].copy() if self._slope is not None else np.zeros(idx.size)
-        it, conv, res = self._solve(idx, ones, xs, ones, False, self.prob.tol if tol is None else tol, w)
+        args = (self._op, self._pre, idx, ones, xs, ones, False, float(prob.tol), int(prob.max_iter), w, True)
+        if self._solve_on_set is None:
+            self._solve_on_set = entry_point(solve_on_set, args)
+        it, conv, res = self._solve_on_set(*args)
         x[idx] = xs
         return x, w, res * np.sqrt(idx.size), it
 

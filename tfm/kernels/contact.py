@@ -297,16 +297,17 @@ def _next_set(contact, pred, F, x0, d, idx_out, b, Fc):
 
 @njit(**PARALLEL_OPTS)
 def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm, marks,
-                        pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+                        pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out,
+                        stop):
     """Two tasks on two threads: the field u = C F of this round and its decisions, beside
     the start of the next round's solve (to its first decision level; Ax2 = C Fc2 when
-    has_Ax2 saves its first application) on the set idx2, the
-    one the predicted changes ``pred`` make (_likely_changes, _next_set). Each task is
-    single-threaded (op1, pre1); they share no buffer: the field has its own, the solve the
-    box buffers, which this round needs again only if the prediction fails (then the caller
-    restricts again). When the field's task is done it stops the solve (stop[0]) at its next
-    iteration: decisions other than the predicted ones, or in doubt, make it useless, and
-    otherwise the caller carries it on with both threads. Results go to counts (n_over,
+    has_Ax2 saves its first application) on the set idx2, the one the predicted changes
+    ``pred`` make (_likely_changes, _next_set). Each task is single-threaded (op1, pre1);
+    they share no buffer: the field has its own, the solve the box buffers, which this round
+    needs again only if the prediction fails (then the caller restricts again). When the
+    field's task is done it stops the solve (stop[0]) at its next check (cg_run): decisions
+    other than the predicted ones, or in doubt, make it useless, and otherwise the caller
+    carries it on with both threads. Results go to counts (n_over,
     n_into, unsure, worst snap, worst entry, prediction right), cg_out (iterations,
     converged, residual, stopped early) and sc2. (The field is the FFT operator's own: a
     tuple such as a workspace cannot enter a prange.)"""
@@ -323,7 +324,7 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
                     right = False
                     break
             counts[5] = right
-            # either way the solve stops at its next iteration: dropped, or carried on by the
+            # either way the solve stops at its next check: dropped, or carried on by the
             # caller with both threads on its transforms
             atomic_store(stop, 0, 1)
         else:
@@ -339,7 +340,8 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
 
 
 def field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-                       marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+                       marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out,
+                       stop):
     """_field_beside_solve for the FFT operator (compiled code only; snap_rounds calls it
     with ``overlap`` only, which the caller sets for FFTData alone)."""
     raise NotImplementedError
@@ -347,16 +349,19 @@ def field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, 
 
 @overload(field_beside_solve, jit_options=NUMBA_OPTS)
 def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-                             marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+                             marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts,
+                             cg_out, stop):
     if getattr(op, "instance_class", None) is not FFTData:
         # never called (no overlap for the other operators), and so not compiled for them
         def stub(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-                 marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+                 marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out,
+                 stop):
             pass
         return stub
 
     def impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-             marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop):
+             marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out,
+             stop):
         # every symbol the two tasks look up is made here: the typed dicts must not take
         # insertions from two threads at once
         n = op.n
@@ -367,7 +372,8 @@ def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
             pre_symbol(pre1.psyms, pre1.kinv, pre1.floor, pre_len(w))
         stop[0] = 0
         _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
-                            marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out, stop)
+                            marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts,
+                            cg_out, stop)
     return impl
 
 
@@ -402,18 +408,17 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     guess predicts (_likely_changes; only with ``guess_entries``: S_GUESS_KEPT and
     S_GUESS_DROPPED count how those fared). It is kept when the field's decisions are
     those, which is nearly always the case while a contact recedes, else stopped and
-    dropped. It is the
-    computation the next round makes on one thread, so the numbers are the same either
-    way, bit for bit.
+    dropped. It is the computation the next round makes on one thread, so the numbers are
+    the same either way, bit for bit.
 
     ``op`` and ``pre`` are the operator's and the preconditioner's data (tfm.kernels.ops).
     ``work`` (2 x 6 x N floats, two sets of: b, the guess, then cg_start's r, z, p, Ap),
     ``iwork`` (2 x N integers: the contact set; one set for this round, one for the next)
     and ``flags`` (2 x N int8: the changes, and the changes predicted) are work space kept
-    for the run. contact, F, u are updated in
-    place (one entry per spring). ``guess`` is the first solve's guess for F; ``u_guess``
-    = C guess when has_u_guess. A first round that only brings springs in is followed by a
-    round from that same guess (0 on the new springs), not from its own F. ``solved``: F and u already hold the solution on the
+    for the run. contact, F, u are updated in place (one entry per spring). ``guess`` is
+    the first solve's guess for F; ``u_guess`` = C guess when has_u_guess. A first round
+    that only brings springs in is followed by a round from that same guess (0 on the new
+    springs), not from its own F. ``solved``: F and u already hold the solution on the
     current set (the first solve is skipped). Counts go to ``stats``; ``fstats`` holds the
     largest relative residual of the tol-solves (updated), then the relative residual and
     ||b|| of the last solve.
