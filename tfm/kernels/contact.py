@@ -296,7 +296,7 @@ def _next_set(contact, pred, F, x0, d, idx_out, b, Fc):
 
 
 @njit(**PARALLEL_OPTS)
-def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm, marks,
+def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, eu, marks,
                         pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out,
                         stop):
     """Two tasks on two threads: the field u = C F of this round and its decisions, beside
@@ -315,7 +315,7 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
         if t == 0:
             field_on_grid(idx, Fc, op1.n, op1.syms, op1.cut2, op1.spacing, op1.diag[0], op1.src,
                           op1.col, op1.out, u, op1.threads)
-            c = _classify(d, idx, contact, F, u, x0, f_th, rel, e, row_norm * e, marks)
+            c = _classify(d, idx, contact, F, u, x0, f_th, rel, e, eu, marks)
             for k in range(5):
                 counts[k] = c[k]
             right = c[2] == 0
@@ -339,7 +339,7 @@ def _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, 
             cg_out[3] = 1.0 if not conv and atomic_load(stop, 0) != 0 else 0.0   # stopped
 
 
-def field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+def field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, eu,
                        marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out,
                        stop):
     """_field_beside_solve for the FFT operator (compiled code only; snap_rounds calls it
@@ -348,18 +348,18 @@ def field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, 
 
 
 @overload(field_beside_solve, jit_options=NUMBA_OPTS)
-def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, eu,
                              marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts,
                              cg_out, stop):
     if getattr(op, "instance_class", None) is not FFTData:
         # never called (no overlap for the other operators), and so not compiled for them
-        def stub(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+        def stub(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, eu,
                  marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out,
                  stop):
             pass
         return stub
 
-    def impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+    def impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, eu,
              marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts, cg_out,
              stop):
         # every symbol the two tasks look up is made here: the typed dicts must not take
@@ -371,7 +371,7 @@ def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
         if pre1.kind == PRE_FFT:
             pre_symbol(pre1.psyms, pre1.kinv, pre1.floor, pre_len(w))
         stop[0] = 0
-        _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, row_norm,
+        _field_beside_solve(op1, pre1, idx, Fc, u, d, contact, F, x0, f_th, rel, e, eu,
                             marks, pred, idx2, b2, Fc2, Ax2, has_Ax2, vecs2, sc2, lev, max_iter, counts,
                             cg_out, stop)
     return impl
@@ -379,7 +379,7 @@ def _field_beside_solve_impl(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
 
 @njit(**NUMBA_OPTS)
 def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th, op, pre, tol,
-                max_iter, max_rounds, single, slack, round_tols, field_level, lam_lo, row_norm, stats,
+                max_iter, max_rounds, single, slack, round_tols, field_level, bound_f, bound_u, stats,
                 fstats, work, iwork, flags, overlap, guess_entries, op1, pre1, prepare_tol, slope,
                 has_slope, base, unit):
     """The rounds of one dilatation step d (Algorithm 1): solve on the contact set, then
@@ -388,17 +388,17 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
 
     Decision levels. A round's solve stops at each of the loose relative residuals
     ``round_tols`` (descending, all > tol) in turn and asks whether the decisions are
-    already certain: ||F - F_tol|| <= (||r|| + tol ||b||) / lam_lo for any two solutions
-    with residuals r and tol ||b|| (lam_lo <= the smallest eigenvalue of every C_SS), and
-    |u_i - u_tol,i| <= row_norm times that (row_norm >= every row's 2-norm of C). If no
-    spring lies within those bounds of its decision line and some spring changes, the
+    already certain. A tol-solve's iterate has a residual of at most tol ||b||, so it
+    differs from this one by at most bound_f (||r|| + tol ||b||) in any F_k and by at most
+    bound_u times that in u_i off the set (tfm.solver.decision_bounds: for every set). If
+    no spring lies within those bounds of its decision line and some spring changes, the
     round's decisions are taken there; the sequence of contact sets is the one tol-solves
     give. Otherwise CG carries on (same Krylov sequence, no restart) to the next level,
     and finally to tol: the last round of every step is a tol-solve. The snap check needs
     only F (and only the contact set: _snap_check), so the field u is computed at a level
     only once no snap is in doubt, and where no spring snaps, not at levels above
     ``field_level``: there the entries are mostly still in doubt. An empty round_tols (or
-    lam_lo <= 0) solves every round to tol.
+    bound_f <= 0) solves every round to tol.
 
     Overlap (``overlap``: the FFT operator on two or more threads). Once a round's snaps are
     certain, the field that decides its entries and the next round's solve to its first
@@ -428,7 +428,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
     from Python, so that a run loads one compiled library the fewer."""
     N = contact.size
     marks, pred = flags[0], flags[1]       # the round's changes, and as predicted
-    loose_ok = round_tols.size > 0 and lam_lo > 0.0 and not single
+    loose_ok = round_tols.size > 0 and bound_f > 0.0 and not single
     first = True
     n_over = n_into = unsure = wo = wi = 0
     cur = 0                                # which of the two work sets this round uses
@@ -492,9 +492,11 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                             break          # the tol-solve below reports a failure
                         stops += 1
                         u_fresh = False
-                        # distance to a tol-solve (the 1e-12 covers CG's recursive-residual
-                        # drift), widened by what it can move the slack itself
-                        e = (res + tol + 1e-12) * bnorm / lam_lo * (1.0 + slack * tol) * (1.0 + 1e-9)
+                        # distance to a tol-solve in F and in u (the 1e-12 covers CG's
+                        # recursive-residual drift), widened by what it can move the slack itself
+                        dist = (res + tol + 1e-12) * bnorm * (1.0 + slack * tol) * (1.0 + 1e-9)
+                        e = bound_f * dist
+                        eu = bound_u * dist
                         n_over, unsure, wo = _snap_check(idx, Fc, f_th, slack * tol, e, marks)
                         n_into = 0
                         if unsure > 0:
@@ -536,7 +538,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                             # steps' first rounds at 1/256)
                             idx2 = iwork[nxt][:m2]
                             field_beside_solve(op, op1, pre1, idx, Fc, u, d, contact, F, x0, f_th,
-                                               slack * tol, e, row_norm, marks, pred, idx2, wn[0, :m2],
+                                               slack * tol, e, eu, marks, pred, idx2, wn[0, :m2],
                                                wn[1, :m2], wn[2, :m2], from_guess, wn[2:], sc_ahead,
                                                round_tols[0], max_iter, counts, cg_out, stop)
                             n_over, n_into, unsure, wo, wi = (counts[0], counts[1], counts[2], counts[3],
@@ -559,7 +561,7 @@ def snap_rounds(d, contact, F, u, guess, u_guess, has_u_guess, solved, x0, f_th,
                             field(op, ws[0], idx, Fc, u)
                         u_fresh = True
                         n_over, n_into, unsure, wo, wi = _classify(d, idx, contact, F, u, x0, f_th,
-                                                                   slack * tol, e, row_norm * e, marks)
+                                                                   slack * tol, e, eu, marks)
                         if unsure == 0:
                             # certain: take the decisions, or, if none, end the step at tol
                             decided = n_over > 0 or n_into > 0
