@@ -80,6 +80,28 @@ def test_tfm_run_flags_a_suspect_run_with_exit_3(tmp_path, capsys):
     assert "grid edge" in capsys.readouterr().err
 
 
+def test_tfm_run_parses_with_the_run_subcommand_alone(capsys):
+    """`tfm run` builds only its own subparser (the others import the campaign code): the
+    same usage line on an error, the same help, and the same parsed arguments as the whole
+    parser; COMMANDS lists the whole parser's subcommands in order."""
+    from tfm.cli import COMMANDS, build_parser
+
+    whole, alone = build_parser(), build_parser("run")
+    assert whole.format_usage() == alone.format_usage()
+    assert tuple(whole._subparsers._group_actions[0].choices) == COMMANDS
+    argv = ["run", "--spacing", "1/64", "--alpha", "0.5", "-q"]
+    assert vars(whole.parse_args(argv)) == vars(alone.parse_args(argv))
+    texts = []
+    for parser in (whole, alone):
+        with pytest.raises(SystemExit):
+            parser.parse_args(["run", "--help"])
+        texts.append(capsys.readouterr().out)
+        with pytest.raises(SystemExit):
+            parser.parse_args(["run", "--no-such-flag"])
+        texts.append(capsys.readouterr().err)
+    assert texts[0] == texts[2] and texts[1] == texts[3] and "--no-such-flag" in texts[1]
+
+
 def test_every_parameter_has_a_flag_with_help():
     from tfm.cli import PARAM_HELP
     assert set(PARAM_HELP) == set(Params.field_names())
