@@ -1,19 +1,23 @@
 """Before/after of two checkouts of tfm on the standard curve, runs interleaved.
 
-    python -m bench.ab_commits OLD_CHECKOUT NEW_CHECKOUT 1/128x5 1/256x5 1/512x3
+    python -m bench.ab_commits OLD_CHECKOUT NEW_CHECKOUT 1/128x5 1/256x5 1/512x3 run:1/128x15
 
 Each ``SPACINGxPAIRS`` runs the curve PAIRS times in each checkout, alternating, one
 process per run (PYTHONPATH = the checkout; NUMBA_NUM_THREADS passed through), and prints
 the medians of tfm.simulate's wall time, their ratio, the CG iterations, whether the contact
 count is equal at every step and how far the pull-offs lie apart. Make a second checkout
 with `git worktree add ../old <commit>`; its first run compiles its kernels (not timed:
-each child compiles on a 1/16 curve first).
+each child compiles on a 1/16 curve first). ``run:SPACINGxPAIRS`` times whole `tfm run`
+processes instead (plot and table included, as `make bench` does), after one untimed
+pair that fills both compile caches, and prints the median ratio of the pairs too.
 """
 import json
 import os
 import statistics
 import subprocess
 import sys
+import tempfile
+import time
 
 CHILD = r'''
 import json, sys
@@ -37,12 +41,45 @@ def run(checkout: str, spacing: str) -> list:
     return json.loads(out.strip().splitlines()[-1])
 
 
+def run_command(checkout: str, spacing: str) -> float:
+    """Wall seconds of one `tfm run` of the standard curve in ``checkout``."""
+    env = {"PYTHONPATH": os.path.abspath(checkout), "PATH": os.environ.get("PATH", "/usr/bin:/bin")}
+    if "NUMBA_NUM_THREADS" in os.environ:
+        env["NUMBA_NUM_THREADS"] = os.environ["NUMBA_NUM_THREADS"]
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "tfm.cli", "run", "--spacing", spacing, "--shape", "paraboloid",
+               "--alpha", "0.75", "--k-th", "0.02", "--radius", "1", "--max-indent", "0.05",
+               "--step", "2.5e-4", "-q", "-o", os.path.join(tmp, "curve.parquet")]
+        t = time.perf_counter()
+        subprocess.run(cmd, env=env, cwd=tmp, check=True, capture_output=True)
+        return time.perf_counter() - t
+
+
+def whole_process(old: str, new: str, spacing: str, pairs: int) -> None:
+    for checkout in (old, new):
+        run_command(checkout, spacing)          # compile caches filled, files cached
+    runs = {old: [], new: []}
+    for _ in range(pairs):
+        for checkout in (old, new):
+            runs[checkout].append(run_command(checkout, spacing))
+    a, b = runs[old], runs[new]
+    ma, mb = statistics.median(a), statistics.median(b)
+    pair = statistics.median(x / y for x, y in zip(a, b))
+    print(f"tfm run {spacing}: old {[round(x, 3) for x in a]} median {ma:.3f} s | new "
+          f"{[round(x, 3) for x in b]} median {mb:.3f} s | old/new {ma / mb:.2f}x, median of the "
+          f"pairs' ratios {pair:.2f}x", flush=True)
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     if len(argv) < 3:
         sys.exit(__doc__)
     old, new, cases = argv[0], argv[1], argv[2:]
     for case in cases:
+        if case.startswith("run:"):
+            spacing, pairs = case[4:].split("x")
+            whole_process(old, new, spacing, int(pairs))
+            continue
         spacing, pairs = case.split("x")
         runs = {old: [], new: []}
         for _ in range(int(pairs)):
