@@ -391,6 +391,23 @@ def test_loose_decision_rounds_rest_on_rigorous_bounds():
             assert bound_f < 1.2 * worst_f
 
 
+def test_no_decision_bounds_without_a_positive_symbol_or_for_other_operators():
+    """decision_bounds gives (0, 0), every round to tol, where it has no lower bound on the
+    eigenvalues: a symbol with a non-positive minimum (the square root of a negative number
+    was NaN), or an operator other than the FFT one."""
+    from tfm.solver import decision_bounds
+
+    p = Params.from_dict(dict(STANDARD, spacing="1/32", max_indent=0.02))
+    prob, _ = build_problem(p)
+    op = prob.operator.compiled()
+    assert min(decision_bounds(op)) > 0
+    flat = op.sym_full.copy()
+    flat[0, 0] = 0.0
+    assert decision_bounds(op._replace(sym_full=flat)) == (0.0, 0.0)
+    direct, _ = build_problem(p.replace(operator="direct"))
+    assert decision_bounds(direct.operator.compiled()) == (0.0, 0.0)
+
+
 @pytest.mark.parametrize("spacing", ["1/64", "1/128"])
 def test_loose_decision_rounds_change_no_decision(spacing):
     """The standard curve with decision-only rounds stopped at ROUND_TOLS and with every

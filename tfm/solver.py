@@ -195,11 +195,14 @@ def decision_bounds(op) -> tuple[float, float]:
     Against the 2-norm bounds used before, 1 / lam and (row 2-norm of C) / lam, these are
     0.85 and 0.27 times as large at 1/256 (fewer springs stay in doubt at a loose level).
     tests/test_engine.py checks both against their worst cases from the dense C. (0, 0)
-    for other operators: they solve every round to tol, with no such bound at hand."""
+    for other operators, and for a symbol without a positive minimum: they solve every
+    round to tol, with no such bound at hand."""
     if not isinstance(op, FFTData):
         return 0.0, 0.0
     sym, P = op.sym_full, op.sym_full.shape[0]
     lam = float(sym.min())
+    if not lam > 0.0:
+        return 0.0, 0.0      # no positive lower bound (a run refused upstream): no loose rounds
     inv_diag = float(np.fft.irfft2(1.0 / sym, s=(P, P))[0, 0])
     return float(np.sqrt(inv_diag / lam)), float(np.sqrt(max(op.diag.max() / lam - 1.0, 0.0)))
 
