@@ -12,6 +12,7 @@ import pytest
 
 from naive import algorithm1_dense
 from reference_engine import reference_curve
+from tfm.config import SKIP_TOL
 from tfm import Params, simulate
 from tfm.geometry import heights, make_layout
 from tfm.operators import kernel_spec
@@ -227,6 +228,23 @@ def test_a_set_kept_two_steps_gets_its_base_and_unit_response_from_the_compiled_
         # tol 1e-12 (solved) or a prediction within it, at condition ~10^2
         assert np.allclose(state.F[idx], F_ref, rtol=0, atol=1e-9 * np.abs(F_ref).max())
     assert prepared_at is not None and prepared_at < d
+
+
+def test_a_base_solve_that_does_not_converge_is_reported():
+    """The base of the predictions replaces the step's F (prepare_predictions): asked for
+    1e-15 relative (tol 1e-14 times SKIP_TOL) from a solution to 1e-12 with no CG iteration
+    allowed (one was enough: the FFT preconditioner is nearly C^-1 at 1/32), it cannot get
+    there, and the run's failure count and worst residual say so, as for any tol-solve,
+    instead of keeping a quietly worse F."""
+    p = Params.from_dict(dict(STANDARD, spacing="1/32", max_indent=0.02, step=2e-3, tol=1e-12))
+    prob, _ = build_problem(p)
+    state, out = ContactState(prob), CurveResult()
+    for k, d in enumerate((-0.005, -0.01, -0.02)):
+        state.advance(d, k, "load", out)
+    assert out.solver_failures == 0
+    prob.max_iter, prob.tol = 0, 1e-14
+    state._rounds(-0.02, state.F.copy(), None, out, solved=True, prepare=True)
+    assert out.solver_failures == 1 and out.max_residual > prob.tol * SKIP_TOL
 
 
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs 2 Numba threads")

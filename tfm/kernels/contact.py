@@ -635,7 +635,10 @@ def prepare_predictions(d, contact, F, u, x0, op, pre, tol, max_iter, slope, has
     the set (unit[0], 0 off it; warm-started from ``slope`` if has_slope) with its field
     w = C x (unit[1]). F(d') = F + (d' - d) x while the set holds. Residuals: ||b - C_SS F||
     (fstats[F_BASE_RES]) and ||1 - C_SS x|| (F_UNIT_RES); two solves and their iterations
-    counted in stats (S_UNIT_ITERS: the unit response's)."""
+    counted in stats (S_UNIT_ITERS: the unit response's). The base replaces the step's F,
+    so a base solve that does not converge counts as a failure (S_FAILURES, and its relative
+    residual in F_MAX_RES), as a tol-solve's would; the unit response's residual is checked
+    by every prediction made from it (tfm.solver.ContactState._predict)."""
     idx = contact_indices(contact, iw)
     m = idx.size
     it = it2 = 0
@@ -655,6 +658,9 @@ def prepare_predictions(d, contact, F, u, x0, op, pre, tol, max_iter, slope, has
         ws = cg_workspace(op, pre, idx)
         it, conv, r = cg_run(op, pre, ws, cg_start(op, ws, idx, b, x, Ax0, True, wk[2:]), idx, x, tol,
                              max_iter)
+        if not conv:
+            stats[S_FAILURES] += 1
+            fstats[F_MAX_RES] = max(fstats[F_MAX_RES], r)
         field(op, ws[0], idx, x, u)
         for k in range(m):
             F[idx[k]] = x[k]
