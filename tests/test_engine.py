@@ -250,7 +250,7 @@ def test_a_base_solve_that_does_not_converge_is_reported():
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs 2 Numba threads")
 @pytest.mark.parametrize("skip", [False, True])
 def test_compiled_engine_is_bitwise_independent_of_thread_count(skip):
-    """A 301 x 301 grid: its transforms (P >= 192) take the threaded path on 2 threads."""
+    """A 513 x 513 grid: its transforms (P >= 192) take the threaded path on 2 threads."""
     p = Params.from_dict(dict(STANDARD, spacing="1/128", extent=2.0, max_indent=0.01, step=1e-3))
     prob, layout = build_problem(p)
     prob.skip_solves = skip
@@ -368,7 +368,7 @@ def test_a_run_switching_modes_gives_the_bits_of_a_serial_run():
     runs = []
     for switching in (False, True):
         state, out = ContactState(prob), CurveResult()
-        assert state.thread_choice is not None            # 301 x 301: P >= THREADED_SIZE
+        assert state.thread_choice is not None            # 513 x 513: P >= THREADED_SIZE
         if not switching:
             state.thread_choice = None
             state.threaded = False
