@@ -19,6 +19,8 @@ import sys
 import tempfile
 import time
 
+from bench.run_bench import tfm_run_command
+
 CHILD = r'''
 import json, sys
 from tfm import Params, simulate
@@ -31,10 +33,16 @@ print(json.dumps([s["wall_time"], s["solver_iters"], s["pull_off_force"], r.curv
 '''
 
 
-def run(checkout: str, spacing: str) -> list:
+def _env(checkout: str) -> dict:
+    """A child's environment: tfm from ``checkout``; NUMBA_NUM_THREADS passed through."""
     env = {"PYTHONPATH": os.path.abspath(checkout), "PATH": os.environ.get("PATH", "/usr/bin:/bin")}
     if "NUMBA_NUM_THREADS" in os.environ:
         env["NUMBA_NUM_THREADS"] = os.environ["NUMBA_NUM_THREADS"]
+    return env
+
+
+def run(checkout: str, spacing: str) -> list:
+    env = _env(checkout)
     # cwd too: `python -c` puts the working directory before PYTHONPATH
     out = subprocess.run([sys.executable, "-c", CHILD, spacing], capture_output=True, text=True,
                          env=env, cwd=os.path.abspath(checkout), check=True).stdout
@@ -43,26 +51,20 @@ def run(checkout: str, spacing: str) -> list:
 
 def run_command(checkout: str, spacing: str) -> float:
     """Wall seconds of one `tfm run` of the standard curve in ``checkout``."""
-    env = {"PYTHONPATH": os.path.abspath(checkout), "PATH": os.environ.get("PATH", "/usr/bin:/bin")}
-    if "NUMBA_NUM_THREADS" in os.environ:
-        env["NUMBA_NUM_THREADS"] = os.environ["NUMBA_NUM_THREADS"]
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "tfm.cli", "run", "--spacing", spacing, "--shape", "paraboloid",
-               "--alpha", "0.75", "--k-th", "0.02", "--radius", "1", "--max-indent", "0.05",
-               "--step", "2.5e-4", "-q", "-o", os.path.join(tmp, "curve.parquet")]
+        cmd = tfm_run_command(spacing, os.path.join(tmp, "curve.parquet"))
         t = time.perf_counter()
-        subprocess.run(cmd, env=env, cwd=tmp, check=True, capture_output=True)
+        subprocess.run(cmd, env=_env(checkout), cwd=tmp, check=True, capture_output=True)
         return time.perf_counter() - t
 
 
 def whole_process(old: str, new: str, spacing: str, pairs: int) -> None:
     for checkout in (old, new):
         run_command(checkout, spacing)          # compile caches filled, files cached
-    runs = {old: [], new: []}
+    a, b = [], []                   # by position: OLD and NEW may be one checkout (an A/A check)
     for _ in range(pairs):
-        for checkout in (old, new):
-            runs[checkout].append(run_command(checkout, spacing))
-    a, b = runs[old], runs[new]
+        a.append(run_command(old, spacing))
+        b.append(run_command(new, spacing))
     ma, mb = statistics.median(a), statistics.median(b)
     pair = statistics.median(x / y for x, y in zip(a, b))
     print(f"tfm run {spacing}: old {[round(x, 3) for x in a]} median {ma:.3f} s | new "
@@ -81,11 +83,10 @@ def main(argv=None):
             whole_process(old, new, spacing, int(pairs))
             continue
         spacing, pairs = case.split("x")
-        runs = {old: [], new: []}
+        a, b = [], []
         for _ in range(int(pairs)):
-            for checkout in (old, new):
-                runs[checkout].append(run(checkout, spacing))
-        a, b = runs[old], runs[new]
+            a.append(run(old, spacing))
+            b.append(run(new, spacing))
         ma, mb = (statistics.median(r[0] for r in x) for x in (a, b))
         print(f"{spacing}: old {[round(r[0], 2) for r in a]} median {ma:.3f} s ({a[0][1]} CG iterations) | "
               f"new {[round(r[0], 2) for r in b]} median {mb:.3f} s ({b[0][1]}) | old/new {ma / mb:.2f}x | "

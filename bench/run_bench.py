@@ -144,13 +144,17 @@ def tfm_in_process(spacing):
     return simulate(Params.from_dict(dict(STANDARD, spacing=spacing))).summary["wall_time"]
 
 
+def tfm_run_command(spacing, out):
+    """The command line of `tfm run` on the standard curve, its table written to ``out``."""
+    return [sys.executable, "-m", "tfm.cli", "run", "--spacing", spacing, "--shape", "paraboloid",
+            "--alpha", "0.75", "--k-th", "0.02", "--radius", "1", "--max-indent", "0.05",
+            "--step", "2.5e-4", "-q", "-o", out]
+
+
 def tfm_whole_process(spacing):
     """`tfm run` of the standard curve, plot and Parquet included."""
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "tfm.cli", "run", "--spacing", spacing, "--shape", "paraboloid",
-               "--alpha", "0.75", "--k-th", "0.02", "--radius", "1", "--max-indent", "0.05",
-               "--step", "2.5e-4", "-q", "-o", os.path.join(tmp, "curve.parquet")]
-        return _timed(cmd)[0]
+        return _timed(tfm_run_command(spacing, os.path.join(tmp, "curve.parquet")))[0]
 
 
 def ratio_table(repeats=3, with_256_baseline=True, pairs_256=1, tfm_runs_256=3):
