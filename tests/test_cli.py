@@ -356,6 +356,62 @@ def test_tfm_run_as_its_own_process_writes_the_table_and_the_figure(tmp_path):
     assert (tmp_path / "c.png").read_bytes() == (tmp_path / "here.png").read_bytes()
 
 
+LEAN_PROBE = """
+import sys
+import tfm.cli as cli
+exit_now = cli.exit_now
+
+
+def probe(code):                 # the process's last act before os._exit
+    print("SCIPY", *[m for m in ("scipy.fft", "scipy.linalg") if m in sys.modules], flush=True)
+    exit_now(code)
+
+
+cli.exit_now = probe
+sys.argv[0] = "tfm"
+cli.main()
+"""
+
+
+def test_tfm_run_as_its_own_process_starts_lean_and_computes_the_same_curve(tmp_path):
+    """`tfm run`'s own process starts rocket-fft and Numba without the SciPy modules they
+    import for features the kernels do not use (tfm.kernels.lean_start; 0.2 s of a 1.2 s
+    run at 1/128). Its curve is the in-process one, bit for bit."""
+    from tfm import simulate
+    from tfm.viewcli import load_run
+
+    out = tmp_path / "c.parquet"
+    done = subprocess.run([sys.executable, "-c", LEAN_PROBE, "run", *SMALL, "--no-plot", "-q", "-o", str(out)],
+                          env=ENV, cwd=REPO, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-1] == "SCIPY", done.stdout[-300:]
+    curve, params, _ = load_run(out)
+    pd.testing.assert_frame_equal(curve, simulate(params).curve, check_exact=True)
+
+
+LEAN_AFTER = """
+import sys
+import numpy as np
+from numba import njit
+from tfm.kernels import lean_start
+
+lean_start()
+print("IMPORTED", *[m for m in ("scipy.fft", "scipy.linalg") if m in sys.modules])
+import scipy.fft, scipy.linalg
+a = np.arange(6.0).reshape(2, 3)
+print("DOT", njit(lambda x, y: np.dot(x, y))(a, a.T).tolist() == (a @ a.T).tolist(),
+      np.allclose(scipy.fft.irfft(scipy.fft.rfft(a[0]), 3), a[0]))
+"""
+
+
+def test_lean_start_leaves_scipy_importable_and_dot_compilable():
+    """What lean_start keeps out is only deferred: both modules import afterwards, and a
+    compiled np.dot (BLAS through scipy.linalg) still works in that process."""
+    done = subprocess.run([sys.executable, "-c", LEAN_AFTER], env=ENV, cwd=REPO, capture_output=True,
+                          text=True, timeout=600)
+    assert done.stdout.splitlines()[-2:] == ["IMPORTED", "DOT True True"], done.stdout[-300:] + done.stderr
+
+
 NO_PANDAS_PROBE = """
 import sys
 from tfm.cli import main

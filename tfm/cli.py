@@ -339,6 +339,9 @@ def cmd_run(args) -> int:
     # the figure's worker imports and warms up while this process loads the engine and runs
     worker = start_worker(p) if plot_path is not None else None
     try:
+        if getattr(args, "own_process", False):
+            from .kernels import lean_start
+            lean_start()
         res, out, plot_path = _run_and_write(args, p, notes, out, plot_path, ckpt, worker)
         failed = worker.finish() if worker is not None and plot_path is not None else None
     except BaseException:
@@ -512,6 +515,7 @@ def main(argv=None) -> int:
         # 1.9 s `tfm run` at 1/128, while a curve leaves almost no cyclic garbage (406
         # objects for a whole 1/64 curve, none for a 1/128 one after it; 2026-11-24).
         gc.disable()
+        args.own_process = True           # nothing but tfm's kernels compiled here (cmd_run)
     try:
         check_thread_settings()
         code = args.func(args)

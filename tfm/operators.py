@@ -16,7 +16,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.fft as sfft
 import numba
 
 from .config import STENCIL_RADIUS
@@ -357,6 +356,8 @@ class StencilPreconditioner:
     name = "stencil"
 
     def __init__(self, symbol, P, n, m=STENCIL_RADIUS):
+        import scipy.fft as sfft          # here only: `tfm run` starts without it (tfm.kernels.lean_start)
+
         kinv = sfft.irfft2(1.0 / symbol, s=(P, P))
         idx = np.r_[np.arange(-m, 0) % P, np.arange(0, m + 1)]
         st = kinv[np.ix_(idx, idx)].copy()
