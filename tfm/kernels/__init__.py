@@ -83,29 +83,30 @@ def _check_cache() -> None:
 _check_cache()
 
 
-# SciPy modules that rocket-fft and Numba import for features these kernels do not use:
-# rocket-fft imports scipy.fft to register its overloads (the kernels call NumPy's FFT
-# interface and rocket-fft's own low-level transforms), and Numba's CPU target imports
-# scipy.linalg to see whether np.dot may call BLAS (the kernels have no matrix products;
-# a later np.dot would still import it when compiled).
-UNUSED_SCIPY = ("scipy.fft", "scipy.linalg")
+def _without(name: str, module: str) -> None:
+    """Import ``module`` while ``name`` cannot be imported (unless it already is): it stays
+    out of the process until something else imports it."""
+    import importlib
+    import sys
+
+    if name in sys.modules:
+        importlib.import_module(module)
+        return
+    sys.modules[name] = None              # `import name` raises ImportError meanwhile
+    try:
+        importlib.import_module(module)
+    finally:
+        if sys.modules.get(name, 0) is None:
+            del sys.modules[name]
 
 
 def lean_start() -> None:
-    """Import rocket-fft and start Numba's CPU target without UNUSED_SCIPY, for `tfm run`'s
-    own process (whose compiled code is all tfm's): 0.1 s of a 1.1 s run at 1/128. The
-    modules stay importable afterwards; only rocket-fft's scipy.fft overloads are then
-    missing from the process. A module already imported stays as it is."""
-    import sys
-
-    blocked = [name for name in UNUSED_SCIPY if name not in sys.modules]
-    for name in blocked:
-        sys.modules[name] = None          # `import name` raises ImportError meanwhile
-    try:
-        import rocket_fft  # noqa: F401
-        from numba.core.registry import cpu_target
-        cpu_target.target_context.refresh()
-    finally:
-        for name in blocked:
-            if sys.modules.get(name, 0) is None:
-                del sys.modules[name]
+    """For `tfm run`'s own process, whose compiled code is all tfm's: import rocket-fft
+    without scipy.fft, which it imports only to register its scipy.fft overloads (the
+    kernels call NumPy's FFT interface and rocket-fft's low-level transforms), and Numba's
+    array functions without scipy.linalg, which they import only to see whether np.dot may
+    call BLAS (the kernels have no matrix products; a compiled np.dot would still import it).
+    0.1-0.2 s of a 1.2 s run at 1/128. Both stay importable; the process then lacks only
+    rocket-fft's scipy.fft overloads."""
+    _without("scipy.fft", "rocket_fft")
+    _without("scipy.linalg", "numba.np.arraymath")
