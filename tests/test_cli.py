@@ -375,7 +375,7 @@ cli.main()
 
 def test_tfm_run_as_its_own_process_starts_lean_and_computes_the_same_curve(tmp_path):
     """`tfm run`'s own process starts rocket-fft and Numba without the SciPy modules they
-    import for features the kernels do not use (tfm.kernels.lean_start; 0.2 s of a 1.2 s
+    import for features the kernels do not use (tfm.kernels.lean_start; 0.1-0.2 s of a 1.2 s
     run at 1/128). Its curve is the in-process one, bit for bit."""
     from tfm import simulate
     from tfm.viewcli import load_run
