@@ -160,6 +160,39 @@ def test_box_places_and_bounds_agree_with_division_for_any_order():
         assert np.array_equal(at, (i - 3) * 80 + j - 2)
 
 
+def test_blocked_dot_sums_its_lanes_and_blocks_in_a_fixed_order():
+    """The compiled dot product against a plain-Python twin of its definition (blocks of
+    REDUCTION_BLOCK, element i of a block in lane i % DOT_LANES, the lanes added pairwise,
+    the blocks in order): the same bits, at lengths around the lane and block edges; and
+    within a few units of round-off of the exact sum (math.fsum)."""
+    import math
+    from tfm.config import REDUCTION_BLOCK
+    from tfm.kernels.grid import DOT_LANES, blocked_dot
+
+    def twin(a, b):
+        total = 0.0
+        for lo in range(0, a.size, REDUCTION_BLOCK):
+            lanes = [0.0] * DOT_LANES
+            for i in range(lo, min(a.size, lo + REDUCTION_BLOCK)):
+                lanes[(i - lo) % DOT_LANES] += float(a[i]) * float(b[i])
+            width = DOT_LANES // 2
+            while width:
+                for j in range(width):
+                    lanes[j] += lanes[j + width]
+                width //= 2
+            total += lanes[0]
+        return total
+
+    rng = np.random.default_rng(11)
+    for n in (0, 1, 15, 16, 17, 4095, 4096, 4097, 10007):
+        a, b = rng.normal(size=n), rng.normal(size=n)
+        got = blocked_dot(a, b)
+        assert got == twin(a, b), n
+        # each partial sum carries at most its length in units of round-off of |a||b|
+        exact = math.fsum(float(x) * float(y) for x, y in zip(a, b))
+        assert abs(got - exact) <= 1e-16 * n * float(np.abs(a) @ np.abs(b)) + 1e-300, n
+
+
 def test_whole_curve_matches_the_old_engine_at_1_128():
     """Every step's contact count equals the old Python engine's, run live."""
     p = Params.from_dict(dict(STANDARD, spacing="1/128"))

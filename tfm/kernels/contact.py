@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit, prange
 from numba.extending import overload
 
-from ..config import NUMBA_OPTS, PARALLEL_OPTS, REDUCTION_BLOCK
+from ..config import NUMBA_OPTS, PARALLEL_OPTS
 from .atomic import atomic_load, atomic_store
 from .fft import fast_len
 from .grid import abs_max, blocked_dot, grid_reach, index_box
@@ -234,19 +234,15 @@ def predicted(Fb, ub, x, w, c, F, u):
 
 @njit(**NUMBA_OPTS)
 def rhs_norm(contact, x0, d):
-    """||d - x0|| over the contact set, summed as blocked_dot sums the gathered vector."""
-    total = 0.0
-    acc = 0.0
-    k = 0
+    """||d - x0|| over the contact set: blocked_dot of the gathered vector, so the same
+    bits as the ||b|| of a solve on that set (cg_start)."""
+    b = np.empty(contact.size)
+    m = 0
     for i in range(contact.size):
         if contact[i]:
-            v = d - x0[i]
-            acc += v * v
-            k += 1
-            if k % REDUCTION_BLOCK == 0:
-                total += acc
-                acc = 0.0
-    return np.sqrt(total + acc)
+            b[m] = d - x0[i]
+            m += 1
+    return np.sqrt(blocked_dot(b[:m], b[:m]))
 
 
 @njit(**NUMBA_OPTS)

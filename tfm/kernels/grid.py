@@ -50,18 +50,38 @@ def abs_max(a):
     return max(max(m0, m1), max(m2, m3))
 
 
+# Lanes of blocked_dot: 16 independent partial sums, which the compiler keeps in two
+# vector registers. One running sum waits for each addition before the next (6.6 us for
+# 8000 elements on the 2-core VM); 16 lanes take 2.5 us (2026-11-29; 8 lanes in scalar
+# registers, 4.3 us). REDUCTION_BLOCK is a multiple of DOT_LANES.
+DOT_LANES = 16
+
+
 @njit(**NUMBA_OPTS)
 def blocked_dot(a, b):
-    """Dot product summed in fixed blocks, then over blocks in order: the same bits on
-    any machine thread count (a parallel version would add the same partials)."""
+    """Dot product in fixed blocks of REDUCTION_BLOCK elements, each summed in DOT_LANES
+    lanes (element i of a block in lane i % DOT_LANES) that are then added pairwise in a
+    fixed order, and the blocks added in order: the same bits for any thread count (a
+    parallel version would add the same partials)."""
     n = a.size
     total = 0.0
+    acc = np.empty(DOT_LANES)
     for lo in range(0, n, REDUCTION_BLOCK):
         hi = min(n, lo + REDUCTION_BLOCK)
-        acc = 0.0
-        for i in range(lo, hi):
-            acc += a[i] * b[i]
-        total += acc
+        acc[:] = 0.0
+        i = lo
+        while i + DOT_LANES <= hi:
+            for j in range(DOT_LANES):
+                acc[j] += a[i + j] * b[i + j]
+            i += DOT_LANES
+        for j in range(hi - i):
+            acc[j] += a[i + j] * b[i + j]
+        width = DOT_LANES // 2
+        while width > 0:
+            for j in range(width):
+                acc[j] += acc[j + width]
+            width //= 2
+        total += acc[0]
     return total
 
 
