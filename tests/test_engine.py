@@ -320,7 +320,7 @@ def test_threads_are_used_only_where_they_can_pay():
 
     small = symbol(1e300, 1 / 64, 3.8, fast_len(2 * 40 - 1))
     large = symbol(1e300, 1 / 64, 3.8, fast_len(2 * 100 - 1))
-    assert small.shape[0] < THREADED_SIZE <= large.shape[0]
+    assert small.shape[1] < THREADED_SIZE <= large.shape[1]       # P (symbols are transposed)
     assert threads_pay(40, small, 2) is False
     assert threads_pay(100, large, 1) is False
     assert isinstance(threads_pay(100, large, 2), bool)

@@ -208,7 +208,7 @@ def test_fft_preconditioner_is_the_wrapped_inverse_kernel(kw):
     spec = kernel_spec(p, layout)
     n = layout.shape[0]
     sym, Pfull = grid_symbol(spec, layout)
-    kinv = np.fft.irfft2(1.0 / sym, s=(Pfull, Pfull))
+    kinv = np.fft.irfft2(1.0 / sym.T, s=(Pfull, Pfull))    # symbols are stored transposed
     M = make_preconditioner(p.replace(preconditioner="fft"), spec, layout)
     rng = np.random.default_rng(4)
     for i0, j0, w in [(3, 5, 9), (10, 2, 17), (0, 0, n)]:
@@ -264,7 +264,7 @@ def test_whole_grid_field_uses_the_smallest_image_free_box():
         return np.array([i * n + j for i in range(i0, i0 + w) for j in range(j0, j0 + w)])
 
     cases = {"corner": block(0, 0, 5), "middle": block(12, 12, 7), "off-middle": block(5, 18, 5)}
-    full = data.sym_full.shape[0]
+    full = data.sym_full.shape[1]
     sizes = {k: field_box(n, 2 * grid_reach(n, idx) + 1) for k, idx in cases.items()}
     assert sizes["corner"] == full and sizes["middle"] < full and sizes["off-middle"] < full
     for name in ("corner", "middle", "off-middle", "corner"):
@@ -285,7 +285,7 @@ def test_convolution_in_parts_has_the_bits_of_whole_calls(w):
     from tfm.kernels.fft import buffers, convolve, fast_len
     rng = np.random.default_rng(w)
     P = fast_len(2 * w - 1)
-    sym = rng.random((P, P // 2 + 1)) + 1.0
+    sym = rng.random((P // 2 + 1, P)) + 1.0         # transposed, as tfm.kernels.fft.symbol
     src, col, out = buffers(w, P)
     src[:, :w] = rng.random((w, w))
     results = []
@@ -293,5 +293,5 @@ def test_convolution_in_parts_has_the_bits_of_whole_calls(w):
         convolve(src, 0, w, col, out, sym, parts)
         results.append(out.copy())
     assert all(np.array_equal(results[0], r) for r in results[1:])
-    ref = np.fft.irfft2(np.fft.rfft2(src, s=(P, P)) * sym, s=(P, P))[:w, :w]
+    ref = np.fft.irfft2(np.fft.rfft2(src, s=(P, P)) * sym.T, s=(P, P))[:w, :w]
     assert np.allclose(results[0][:, :w], ref, rtol=0, atol=RTOL * np.abs(ref).max())

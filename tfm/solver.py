@@ -199,11 +199,11 @@ def decision_bounds(op) -> tuple[float, float]:
     round to tol, with no such bound at hand."""
     if not isinstance(op, FFTData):
         return 0.0, 0.0
-    sym, P = op.sym_full, op.sym_full.shape[0]
+    sym, P = op.sym_full, op.sym_full.shape[1]
     lam = float(sym.min())
     if not lam > 0.0:
         return 0.0, 0.0      # no positive lower bound (a run refused upstream): no loose rounds
-    inv_diag = float(np.fft.irfft2(1.0 / sym, s=(P, P))[0, 0])
+    inv_diag = float(np.fft.irfft2(1.0 / sym.T, s=(P, P))[0, 0])   # sym is transposed (fft.symbol)
     return float(np.sqrt(inv_diag / lam)), float(np.sqrt(max(op.diag.max() / lam - 1.0, 0.0)))
 
 
@@ -254,7 +254,7 @@ class ContactState:
         # (the field beside the next round's solve alone gained 5 % at 1/128 forced on, and
         # nothing under the thread choice: 0.29 s either way, 2026-11-28)
         can_thread = (isinstance(self._op, FFTData) and numba.get_num_threads() > 1
-                      and self._op.sym_full.shape[0] >= THREADED_SIZE)
+                      and self._op.sym_full.shape[1] >= THREADED_SIZE)
         if prob.threads not in ("auto", "serial", "threaded"):
             raise ValueError(f"Problem.threads: must be 'auto', 'serial' or 'threaded', got {prob.threads!r}")
         self._overlap = False

@@ -10,6 +10,14 @@ place: a separate spectrum array, zero-padded into the columns by pocketfft, mad
 convolution on one thread 1.09-1.18x slower at P = 192-960 (`python -m bench.run_bench
 --only fft`, both versions, 2026-11-24).
 
+The column array is stored transposed, (P // 2 + 1) x P: each column of the spectrum is a
+contiguous row, so the column transforms, the dominant stage, run along the contiguous
+axis (pocketfft's copies of strided columns into its buffers and back took 16-20 % of a
+1/256 curve under `perf`). The rows' transforms write and read it through transposed
+views. The symbols are stored in the same layout (``symbol``). The same bits as the
+untransposed layout; one convolution on one thread 1.05-1.09x faster at P = 120-256
+(2026-11-29).
+
 Threads: each stage's 1-D transforms are cut into one part per Numba thread, each part one
 single-threaded pocketfft call. pocketfft works through a call's transforms in SIMD
 bundles; parts cut at multiples of ALIGN leave the bundles whole, and the result is then
@@ -31,7 +39,6 @@ from .compliance import offdiag
 # tried, cuts at any place did not (P = 320).
 ALIGN = 8
 THREADED_SIZE = FFT_THREADED_SIZE
-AXIS0 = np.array([0], dtype=np.int64)
 AXIS1 = np.array([1], dtype=np.int64)
 
 
@@ -53,6 +60,8 @@ def fast_len(target):
 def symbol(cut2, spacing, diag0, P):
     """Real symbol of the kernel on a P x P periodic box: exact linear convolution for
     sources and targets within a (P + 1) // 2 wide box (offsets |a|, |b| <= half - 1).
+    Transposed, as ``convolve`` reads it: shape (P // 2 + 1, P), entry [j, i] the value at
+    [i, j] of np.fft.rfft2's layout (``spectrum`` turns it back).
     The box holds the kernel at every offset, P / 2 of an even P included: left at zero,
     that line put a checkerboard dip in the symbol (1/r: a minimum of (self_term - 2.905)
     / spacing instead of the lattice's (self_term - 1.6155) / spacing), which refused
@@ -68,15 +77,21 @@ def symbol(cut2, spacing, diag0, P):
             else:
                 K[i, j] = offdiag((a * a + b * b) * spacing * spacing, cut2)
     # the kernel is real and even, so its transform is real up to round-off
-    return np.ascontiguousarray(np.fft.rfft2(K).real)
+    return np.ascontiguousarray(np.fft.rfft2(K).real.T)
+
+
+@njit(**NUMBA_OPTS)
+def spectrum(sym):
+    """A symbol (``symbol``'s transposed layout) in np.fft.rfft2's layout, P x (P // 2 + 1)."""
+    return np.ascontiguousarray(sym.T)
 
 
 @njit(**NUMBA_OPTS)
 def inverse_kernel(sym):
     """The inverse of the kernel with symbol ``sym`` (P x P periodic box), in real space:
     C^-1 as a kernel on the same box (offset 0 at [0, 0])."""
-    P = sym.shape[0]
-    return np.ascontiguousarray(np.fft.irfft2(1.0 / sym, s=(P, P)))
+    P = sym.shape[1]
+    return np.ascontiguousarray(np.fft.irfft2(1.0 / spectrum(sym), s=(P, P)))
 
 
 @njit(**NUMBA_OPTS)
@@ -84,14 +99,15 @@ def wrapped_symbol(kernel, P, floor):
     """Symbol of ``kernel`` (real space on a larger periodic box, offset 0 at [0, 0])
     truncated to the offsets -P//2 ... P - P//2 - 1 of a P x P periodic box and wrapped
     onto it, floored at ``floor`` > 0 so that the circulant stays positive definite. The
-    offsets form a symmetric set modulo P, so an even kernel stays even."""
+    offsets form a symmetric set modulo P, so an even kernel stays even. In ``symbol``'s
+    transposed layout."""
     Q = kernel.shape[0]
     half = P // 2
     K = np.empty((P, P))
     for a in range(-half, P - half):
         for b in range(-half, P - half):
             K[a % P, b % P] = kernel[a % Q, b % Q]
-    s = np.ascontiguousarray(np.fft.rfft2(K).real)
+    s = np.ascontiguousarray(np.fft.rfft2(K).real.T)
     for i in range(s.shape[0]):
         for j in range(s.shape[1]):
             s[i, j] = max(s[i, j], floor)
@@ -109,29 +125,31 @@ def _cut(n, k, parts):
 
 @njit(**NUMBA_OPTS)
 def _rows_forward(src, col, lo, hi):
+    """Rows lo:hi of the source, transformed into columns lo:hi of the (transposed) column
+    array."""
     if hi > lo:
-        r2c(src[lo:hi], col[lo:hi], AXIS1, True, 1.0, 1)
+        r2c(src[lo:hi], col[:, lo:hi].T, AXIS1, True, 1.0, 1)
 
 
 @njit(**NUMBA_OPTS)
 def _columns(col, sym, r0, r1, lo, hi):
-    """Columns lo:hi, in place: zero outside the source rows r0:r1, forward, times the
-    symbol, back."""
+    """Columns lo:hi of the spectrum (rows of the transposed array), in place: zero outside
+    the source rows r0:r1, forward, times the symbol, back."""
     if hi > lo:
-        col[:r0, lo:hi] = 0.0
-        col[r1:, lo:hi] = 0.0
-        c2c(col[:, lo:hi], col[:, lo:hi], AXIS0, True, 1.0, 1)
-        for i in range(col.shape[0]):
-            for j in range(lo, hi):
-                col[i, j] *= sym[i, j]
-        c2c(col[:, lo:hi], col[:, lo:hi], AXIS0, False, 1.0, 1)
+        col[lo:hi, :r0] = 0.0
+        col[lo:hi, r1:] = 0.0
+        c2c(col[lo:hi], col[lo:hi], AXIS1, True, 1.0, 1)
+        for j in range(lo, hi):
+            for i in range(col.shape[1]):
+                col[j, i] *= sym[j, i]
+        c2c(col[lo:hi], col[lo:hi], AXIS1, False, 1.0, 1)
 
 
 @njit(**NUMBA_OPTS)
 def _rows_inverse(col, out, lo, hi):
     if hi > lo:
         P = out.shape[1]
-        c2r(col[lo:hi], out[lo:hi], AXIS1, False, 1.0 / (P * P), 1)
+        c2r(col[:, lo:hi].T, out[lo:hi], AXIS1, False, 1.0 / (P * P), 1)
 
 
 # The three stages twice: whole calls on one thread, and in ``parts`` parts over the Numba
@@ -140,7 +158,7 @@ def _rows_inverse(col, out, lo, hi):
 @njit(**NUMBA_OPTS)
 def _stages_serial(src, r0, r1, col, out, sym):
     _rows_forward(src, col, r0, r1)
-    _columns(col, sym, r0, r1, 0, col.shape[1])
+    _columns(col, sym, r0, r1, 0, col.shape[0])
     _rows_inverse(col, out, 0, out.shape[0])
 
 
@@ -148,7 +166,7 @@ def _stages_serial(src, r0, r1, col, out, sym):
 def _stages_parallel(src, r0, r1, col, out, sym, parts):
     for k in prange(parts):
         _rows_forward(src, col, r0 + _cut(r1 - r0, k, parts), r0 + _cut(r1 - r0, k + 1, parts))
-    H = col.shape[1]
+    H = col.shape[0]
     for k in prange(parts):
         _columns(col, sym, r0, r1, _cut(H, k, parts), _cut(H, k + 1, parts))
     W = out.shape[0]
@@ -163,7 +181,7 @@ def threads_pay(w, sym, threads, repeats=5):
     barrier can wait a scheduler slice (`python -m bench.run_bench --only fft` with two
     other jobs running: one convolution at P = 480 took 24 ms threaded against 2.4 ms on
     one thread)."""
-    P = sym.shape[0]
+    P = sym.shape[1]
     if threads < 2 or P < THREADED_SIZE:
         return False
     src, col, out = buffers(w, P)
@@ -182,9 +200,9 @@ def threads_pay(w, sym, threads, repeats=5):
 @njit(**NUMBA_OPTS)
 def buffers(W, P):
     """Zeroed work arrays of a convolution of a W x W box on the P x P periodic box: the
-    sources (W x P: columns from W on stay zero), the spectra (P x (P // 2 + 1)) and the
-    result."""
-    return (np.zeros((W, P)), np.zeros((P, P // 2 + 1), dtype=np.complex128), np.zeros((W, P)))
+    sources (W x P: columns from W on stay zero), the spectra (transposed: (P // 2 + 1) x P)
+    and the result."""
+    return (np.zeros((W, P)), np.zeros((P // 2 + 1, P), dtype=np.complex128), np.zeros((W, P)))
 
 
 @njit(**NUMBA_OPTS)
@@ -193,7 +211,7 @@ def convolve(src, r0, r1, col, out, sym, threads):
     columns from W on; col and out as made by ``buffers``. Cut into ``threads`` parts over
     the Numba threads from THREADED_SIZE if threads > 1 (decided in Python by threads_pay);
     the bits are the same either way."""
-    P = sym.shape[0]
+    P = sym.shape[1]
     if threads > 1 and P >= THREADED_SIZE:
         _stages_parallel(src, r0, r1, col, out, sym, threads)
     else:
@@ -203,8 +221,8 @@ def convolve(src, r0, r1, col, out, sym, threads):
 @njit(**NUMBA_OPTS)
 def box_apply(sym, src, vals, tgt, n, i0, j0, w, threads):
     """u at the flat grid indices tgt of C applied to vals at src, on the w x w box at
-    (i0, j0) that holds both (P = sym.shape[0] >= 2 w - 1)."""
-    P = sym.shape[0]
+    (i0, j0) that holds both (P = sym.shape[1] >= 2 w - 1)."""
+    P = sym.shape[1]
     box, col, out = buffers(w, P)
     r0 = w
     r1 = 0

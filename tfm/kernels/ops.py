@@ -43,7 +43,7 @@ class FFTData(NamedTuple):
     cut2: float
     diag: np.ndarray        # C_ii per spring
     syms: object            # typed dict P -> symbol (shared with the operator)
-    sym_full: np.ndarray    # symbol of the whole grid's box, P = fast_len(2 n - 1)
+    sym_full: np.ndarray    # symbol of the whole grid's box, P = fast_len(2 n - 1) (fft.symbol's layout)
     src: np.ndarray         # work buffers of the whole-grid field (fft.buffers(n, P))
     col: np.ndarray
     out: np.ndarray
@@ -186,14 +186,14 @@ def box_places(idx, n, i0, j0, P, at):
 
 @njit(**NUMBA_OPTS)
 def box_views(fsrc, fcol, fout, W, P, h):
-    """The W x P source and result boxes and the P x (P // 2 + 1) spectra of a convolution
-    (fft.convolve), as views of flat buffers kept for the whole run, with the h source
+    """The W x P source and result boxes and the (P // 2 + 1) x P spectra of a convolution
+    (fft.convolve, transposed), as views of flat buffers kept for the whole run, with the h source
     rows zeroed: the spectra need no zeros (the transform writes every entry it reads) and
     the result rows are written. Zeroed arrays of the solve's own made restrict take 0.10
     ms a solve at 1/256 (a full contact, P = 240), these 0.04 ms (2026-11-28)."""
     src = fsrc[:W * P].reshape((W, P))
     src[:h] = 0.0
-    return src, fcol[:P * (P // 2 + 1)].reshape((P, P // 2 + 1)), fout[:W * P].reshape((W, P))
+    return src, fcol[:P * (P // 2 + 1)].reshape((P // 2 + 1, P)), fout[:W * P].reshape((W, P))
 
 
 def box_buffers(W, P, N):
@@ -363,7 +363,7 @@ def field_on_grid(idx, vals, n, syms, cut2, spacing, diag0, src, col, out, u, th
     P = field_box(n, 2 * grid_reach(n, idx) + 1)
     sym = cached_symbol(syms, P, cut2, spacing, diag0)
     src_p = src.reshape(-1)[:n * P].reshape((n, P))
-    col_p = col.reshape(-1)[:P * (P // 2 + 1)].reshape((P, P // 2 + 1))
+    col_p = col.reshape(-1)[:P * (P // 2 + 1)].reshape((P // 2 + 1, P))
     out_p = out.reshape(-1)[:n * P].reshape((n, P))
     r0 = idx[0] // n
     r1 = idx[idx.size - 1] // n + 1
