@@ -51,13 +51,18 @@ SKIP_MIN_TOL = 1e-14
 
 # Box size P from which the compiled FFT cuts its stages into one part per Numba thread
 # (when there are more than one: NUMBA_NUM_THREADS=1 keeps a run on one core, as campaign
-# workers do). One convolution, medians of 200 on the quiet 2-core VM (`python -m
-# bench.run_bench --only fft`, 2026-11-24): P = 128, 0.071 ms either way; P = 192, 0.128 ms
-# on 2 threads vs 0.166 ms on one; P = 480, 0.69 vs 1.15 ms. Under load, or when the OpenMP
-# worker must be woken between parallel regions, threads can cost more than they save, so
-# the compiled solve picks the mode from its own steps (tfm.solver.ThreadChoice); the
-# Python-level FFTOperator.apply times both ways once at start (tfm.kernels.fft.threads_pay).
-FFT_THREADED_SIZE = 192
+# workers do). Since the spectra are stored transposed (tfm.kernels.fft), each thread's
+# columns are one block of memory, and two threads pay from P ~ 80: one convolution on the
+# quiet 2-core VM, medians of 2000 (2026-11-29), P = 64 12.9 us on one thread against
+# 13.7 us on two, P = 96 26.9 against 21.9, P = 128 46.8 against 32.2, P = 192 101 against
+# 59. (With the columns strided, as before, two threads gained only 1.10-1.18x at P = 192-
+# 960, and the threshold was 192.) Standard curve, 8 interleaved pairs against 192: 1/256
+# 1.06x, 1/128 1.05x (`python -m bench.ab_commits`); 64 and 128 gave no more. Under load,
+# or when the OpenMP worker must be woken between parallel regions, threads can cost more
+# than they save, so the compiled solve picks the mode from its own steps
+# (tfm.solver.ThreadChoice); the Python-level FFTOperator.apply times both ways once at
+# start (tfm.kernels.fft.threads_pay).
+FFT_THREADED_SIZE = 96
 
 
 # The FFT preconditioner M = R C^-1 R^T applies the inverse kernel (real space, taken once
