@@ -440,7 +440,9 @@ class ContactState:
         if (self.contact & prob.edge).any():
             out.edge_steps += 1
         out.solver_iters += iters
-        # 0.0 - sum: no contact gives P = +0.0, not -0.0 (printed "P = -0")
-        return StepRecord(k, phase, d, 0.0 - float(self.F.sum()), float(prob.area[self.contact].sum()),
-                          int(self.contact.sum()), snapped, entered, rounds, iters)
+        # 0.0 - sum: no contact gives P = +0.0, not -0.0 (printed "P = -0"). np.compress
+        # gathers what area[contact] does (the same sum, bit for bit) in half the time
+        return StepRecord(k, phase, d, 0.0 - float(self.F.sum()),
+                          float(np.compress(self.contact, prob.area).sum()),
+                          int(np.count_nonzero(self.contact)), snapped, entered, rounds, iters)
 
