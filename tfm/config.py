@@ -64,6 +64,14 @@ SKIP_MIN_TOL = 1e-14
 # start (tfm.kernels.fft.threads_pay).
 FFT_THREADED_SIZE = 96
 
+# ... but a run uses a second thread at all only if its whole grid's box is at least this
+# large (tfm.solver.ContactState). A smaller grid's curve is short and gains little from
+# threads (1/128, whole box P = 180: 0.233 against 0.245 s in-process), while its second
+# busy core slows whatever runs beside it: `tfm run`'s figure process warms up during
+# the curve, and the whole `tfm run` at 1/128 took 1.04-1.16 s with two threads against
+# 0.91-0.97 s with one (2026-11-29; without the figure 0.76-0.82 against 0.78-0.84 s).
+RUN_THREADED_SIZE = 192
+
 
 # The FFT preconditioner M = R C^-1 R^T applies the inverse kernel (real space, taken once
 # from the whole grid's symbol) wrapped onto a periodic box of P >= w + 2 PRE_BOX_MARGIN,

@@ -16,13 +16,12 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS, SKIP_MIN_TOL, SKIP_TOL
+from .config import DECISION_SLACK, FIELD_LEVEL, ROUND_TOLS, RUN_THREADED_SIZE, SKIP_MIN_TOL, SKIP_TOL
 from .kernels.contact import (F_BASE_RES, F_LAST_BNORM, F_LAST_RES, F_MAX_RES, F_UNIT_RES, N_FSTATS,
                               N_STATS, S_AHEAD, S_DROPPED, S_ENTERED, S_EXCEEDED, S_FAILURES,
                               S_GUESS_DROPPED, S_GUESS_KEPT, S_ITERS, S_PREPARED, S_REFINES, S_ROUNDS,
                               S_SNAPPED, S_SOLVES, S_UNIT_ITERS, difference_quotients, extrapolate,
                               predicted, rhs_norm, snap_rounds, solve_on_set)
-from .kernels.fft import THREADED_SIZE
 from .kernels.ops import PRE_FFT, FFTData
 from .operators import pre_data
 
@@ -88,7 +87,7 @@ def entry_point(dispatcher, args):
 
 class ThreadChoice:
     """Serial or threaded (the field beside the next round's solve, and transforms split
-    from THREADED_SIZE), chosen from the run's own steps, again and again.
+    from tfm.kernels.fft.THREADED_SIZE), chosen from the run's own steps, again and again.
 
     The bits do not depend on the choice, only the time. Neither mode wins everywhere on
     the 2-core VM: in its quiet spells the standard 1/256 curve took 1.51-1.52 s threaded
@@ -250,11 +249,10 @@ class ContactState:
         self._work = (np.empty((2, 6, n)), np.empty((2, n), dtype=np.int64), np.zeros((2, n), dtype=np.int8))
         # a step's guess, its field and the start of the step (read within advance only)
         self._step_work = (np.empty(n), np.empty(n), np.empty(n), np.empty(n))
-        # threads only where convolve could use them: the whole grid's box from THREADED_SIZE
-        # (the field beside the next round's solve alone gained 5 % at 1/128 forced on, and
-        # nothing under the thread choice: 0.29 s either way, 2026-11-28)
+        # threads only on grids whose whole box reaches RUN_THREADED_SIZE (tfm/config.py:
+        # a short curve gains less than its second busy core costs what runs beside it)
         can_thread = (isinstance(self._op, FFTData) and numba.get_num_threads() > 1
-                      and self._op.sym_full.shape[1] >= THREADED_SIZE)
+                      and self._op.sym_full.shape[1] >= RUN_THREADED_SIZE)
         if prob.threads not in ("auto", "serial", "threaded"):
             raise ValueError(f"Problem.threads: must be 'auto', 'serial' or 'threaded', got {prob.threads!r}")
         self._overlap = False
