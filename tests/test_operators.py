@@ -195,6 +195,29 @@ def test_preconditioners_are_symmetric_positive_definite(choice):
 
 
 @pytest.mark.parametrize("kw", [KERNELS[0], KERNELS[3]], ids=["boussinesq", "neighbors-3"])
+def test_stencil_preconditioner_is_the_truncated_inverse_kernel(kw):
+    """The stencil against C^-1 as the FFT preconditioner takes it (compiled, from the
+    grid's symbol): the offsets -m ... m of the inverse kernel, the centre only raised
+    (never lowered) to keep it positive definite. The symbols are stored transposed; read
+    untransposed, they gave a stencil of another kernel that was still symmetric and
+    positive, so only its iteration counts would have shown it."""
+    from tfm.config import STENCIL_RADIUS as m
+    p = tiny(preconditioner="stencil", **kw)
+    layout = make_layout(p)
+    spec = kernel_spec(p, layout)
+    kinv = make_preconditioner(p.replace(preconditioner="fft"), spec, layout).kinv
+    P = kinv.shape[0]
+    idx = np.r_[np.arange(-m, 0) % P, np.arange(0, m + 1)]
+    want = kinv[np.ix_(idx, idx)]
+    got = make_preconditioner(p, spec, layout).stencil
+    off = np.ones_like(want, dtype=bool)
+    off[m, m] = False
+    # round-off of two P x P transforms
+    assert np.allclose(got[off], want[off], rtol=0, atol=1e-12 * np.abs(want).max())
+    assert got[m, m] >= want[m, m] * (1 - 1e-12)
+
+
+@pytest.mark.parametrize("kw", [KERNELS[0], KERNELS[3]], ids=["boussinesq", "neighbors-3"])
 def test_fft_preconditioner_is_the_wrapped_inverse_kernel(kw):
     """The compiled FFT preconditioner against a NumPy double loop of its definition: C^-1
     in real space from the whole grid's symbol, truncated to the offsets -P//2 ... P - P//2 - 1
