@@ -80,6 +80,9 @@ def test_the_field_beside_the_next_solve_gives_the_serial_curve_bit_for_bit():
     assert (a.n_solves, a.solver_iters) == (b.n_solves, b.solver_iters)
     snapping = sum(s.rounds - 1 for s in b.steps if s.n_snapped > 0)
     assert a.solves_ahead == 0 and b.solves_ahead > snapping // 2
+    # the summary's threaded_steps: none serial, every step with a solve when threaded
+    assert a.threaded_steps == 0
+    assert b.threaded_steps == sum(s.solver_iters > 0 for s in b.steps) > 0
 
 
 def test_a_solve_beside_a_field_that_finds_an_entry_is_dropped_without_a_trace():

@@ -356,6 +356,9 @@ def summarize(curve, out, p: Params, n_springs: int, grid_side: int | None) -> d
         "grid_side": grid_side,
         "half_width": p.half_width,
         "wall_time": float(out.wall_time),
+        # steps with a solve taken on all Numba threads (the thread choice varies with the
+        # machine's load: like wall_time, not part of the run's result; docs/tables.md)
+        "threaded_steps": int(out.threaded_steps),
         "contact_reached_edge": bool(out.edge_steps),
         "solver_not_converged": bool(out.solver_failures),
         "rounds_exceeded": bool(out.rounds_exceeded),

@@ -73,6 +73,7 @@ class CurveResult:
     solves_ahead: int = 0        # solves run beside the previous round's field and kept
     solves_dropped: int = 0      # ... and dropped (an entry in that round, or one in doubt)
     edge_steps: int = 0
+    threaded_steps: int = 0      # steps with a solve taken in the threaded mode (ContactState.threaded)
     unload_complete: bool = True
     wall_time: float = 0.0
 
@@ -421,6 +422,8 @@ class ContactState:
         rounds, iters, snapped, entered = self._rounds(d, guess, u_guess, out, solved, prepare)
         if choice is not None:
             choice.record(self.threaded, time.perf_counter() - t0, iters, rounds)
+        if iters and self.threaded:
+            out.threaded_steps += 1
         self._steps_kept = 0 if snapped or entered else self._steps_kept + 1
         if snapped or entered:
             self._set_id += 1
