@@ -236,26 +236,44 @@ p = Params.from_dict(dict({std}, spacing={sp!r}))
 simulate(p.replace(spacing=1 / 16))
 c0 = time.process_time()
 res = simulate(p)
+cpu = time.process_time() - c0
 s = res.summary
-print(json.dumps(dict(wall=s["wall_time"], cpu=time.process_time() - c0, solves=s["n_solves"],
+print(json.dumps(dict(wall=s["wall_time"], cpu=cpu, solves=s["n_solves"],
       iters=s["solver_iters"], pull_off=s["pull_off_force"], side=s["grid_side"],
-      rss=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)))
+      rss=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, threaded=s["threaded_steps"],
+      solved=int((res.curve["solver_iters"] > 0).sum()))))
 """
 
 
-def scale_table(spacings=("1/64", "1/128", "1/256", "1/512", "1/1024")):
-    """One subprocess per spacing: wall, solves, CG iterations, CPU/wall, peak RSS."""
-    rows = []
+def scale_table(spacings=("1/64", "1/128", "1/256", "1/512", "1/1024"), repeats=3):
+    """One subprocess per spacing and repeat: wall, solves, CG iterations, CPU/wall, the
+    steps the thread choice ran threaded, peak RSS. The repeats go round all spacings in
+    turn, so that those of one spacing lie minutes apart, not inside one slow spell of the
+    machine; a row per run, then the medians."""
+    runs = {sp: [] for sp in spacings}
+    for k in range(repeats):
+        for sp in spacings:
+            code = _CHILD.format(std=STANDARD, sp=sp)
+            out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                 env=_env(), cwd=ROOT, check=True).stdout
+            r = json.loads(out.strip().splitlines()[-1])
+            r["cpu_wall"] = r["cpu"] / r["wall"]
+            runs[sp].append(r)
+            print(f"| {k + 1} | {time.strftime('%H:%M:%S')} | {sp} | {r['side']}^2 | {r['wall']:.2f} | "
+                  f"{r['solves']} | {r['iters']} | {r['cpu_wall']:.2f} | {r['threaded']} / {r['solved']} | "
+                  f"{r['rss'] / 1024:.0f} | {r['pull_off']:.10g} |", flush=True)
+    med = lambda sp, key: statistics.median(r[key] for r in runs[sp])  # noqa: E731
+    print(f"\n## Medians over {repeats} run(s) per spacing\n")
+    print("| spacing | grid | wall s | solves | CG iterations | CPU/wall | peak RSS MiB | pull-off |")
+    print("|---|---|---|---|---|---|---|---|")
     for sp in spacings:
-        code = _CHILD.format(std=STANDARD, sp=sp)
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             env=_env(), cwd=ROOT, check=True).stdout
-        r = json.loads(out.strip().splitlines()[-1])
-        rows.append((sp, r["side"], r["wall"], r["solves"], r["iters"], r["cpu"] / r["wall"],
-                     r["rss"] / 1024.0, r["pull_off"]))
-        print(f"| {sp} | {r['side']}^2 | {r['wall']:.2f} | {r['solves']} | {r['iters']} | "
-              f"{r['cpu'] / r['wall']:.2f} | {r['rss'] / 1024:.0f} | {r['pull_off']:.7g} |", flush=True)
-    return rows
+        r = runs[sp][0]
+        print(f"| {sp} | {r['side']}^2 | {med(sp, 'wall'):.2f} | {r['solves']} | {r['iters']} | "
+              f"{med(sp, 'cpu_wall'):.2f} | {med(sp, 'rss') / 1024:.0f} | {r['pull_off']:.10g} |", flush=True)
+    for sp in spacings:
+        if len({(r["solves"], r["iters"], r["pull_off"]) for r in runs[sp]}) > 1:
+            print(f"\nWARNING: {sp}: solves, CG iterations or pull-off differ between repeats")
+    return runs
 
 
 def main(argv=None):
@@ -265,6 +283,8 @@ def main(argv=None):
     ap.add_argument("--scale", action="store_true",
                     help="only the scaling table 1/64 ... 1/1024 (one subprocess per spacing)")
     ap.add_argument("--max-spacing", default="1/1024", help="--scale: finest spacing")
+    ap.add_argument("--scale-repeats", type=int, default=3,
+                    help="--scale: runs per spacing, taken in turn (1/1024 takes 1.5-2 min each)")
     ap.add_argument("--no-baseline-256", action="store_true",
                     help="skip the plain SciPy baseline at 1/256 (about 2 min)")
     ap.add_argument("--repeats", type=int, default=3, help="A/B pairs per ratio")
@@ -273,11 +293,13 @@ def main(argv=None):
     args = ap.parse_args(argv)
     print(f"# tfm benchmarks\n\nmachine: {machine()}\n")
     if args.scale:
-        print("## Standard curve, one process per spacing (CPU/wall = cores busy)\n")
-        print("| spacing | grid | wall s | solves | CG iterations | CPU/wall | peak RSS MiB | pull-off |")
-        print("|---|---|---|---|---|---|---|---|")
+        print("## Standard curve, one process per spacing and run (CPU/wall = cores busy; "
+              "threaded = steps with a solve that the thread choice ran on all threads)\n")
+        print("| run | time | spacing | grid | wall s | solves | CG iterations | CPU/wall "
+              "| threaded / solved steps | peak RSS MiB | pull-off |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         all_sp = ("1/64", "1/128", "1/256", "1/512", "1/1024")
-        scale_table(all_sp[: all_sp.index(args.max_spacing) + 1])
+        scale_table(all_sp[: all_sp.index(args.max_spacing) + 1], args.scale_repeats)
         return
     if args.only in (None, "ratios"):
         print("## Against the plain SciPy script (bench/baseline.py), interleaved, medians\n")
