@@ -27,7 +27,7 @@ bench:              ## ratios against bench/baseline.py, before/after, operators
 bench-quick:        ## the ratios without the 2-minute baseline run at 1/256
 	$(PYTHON) -m bench.run_bench --only ratios --no-baseline-256
 
-bench-scale:        ## scaling table 1/64 ... 1/1024: wall, solves, CG iterations, CPU/wall, peak RSS
+bench-scale:        ## scaling table 1/64 ... 1/1024, three runs each in turn (about 6 min): wall, solves, CG iterations, CPU/wall, threaded steps, peak RSS; medians
 	$(PYTHON) -m bench.run_bench --scale
 
 validate:           ## tfm against ContactMechanics (non-adhesive rough contact); pip install -e ".[validate]"
