@@ -281,7 +281,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="smaller sizes and fewer repeats")
     ap.add_argument("--only", choices=["ratios", "old", "rounds", "fft", "operators", "curves", "tree"], default=None)
     ap.add_argument("--scale", action="store_true",
-                    help="only the scaling table 1/64 ... 1/1024 (one subprocess per spacing)")
+                    help="only the scaling table 1/64 ... 1/1024 (one subprocess per spacing and run, medians)")
     ap.add_argument("--max-spacing", default="1/1024", help="--scale: finest spacing")
     ap.add_argument("--scale-repeats", type=int, default=3,
                     help="--scale: runs per spacing, taken in turn (1/1024 takes 1.5-2 min each)")
