@@ -358,7 +358,7 @@ class StencilPreconditioner:
     def __init__(self, symbol, P, n, m=STENCIL_RADIUS):
         import scipy.fft as sfft          # here only: `tfm run` starts without it (tfm.kernels.lean_start)
 
-        kinv = sfft.irfft2(1.0 / symbol.T, s=(P, P))   # symbols are stored transposed (fft.symbol)
+        kinv = fftk.inverse_kernel(symbol)      # C^-1 as the FFT preconditioner takes it
         idx = np.r_[np.arange(-m, 0) % P, np.arange(0, m + 1)]
         st = kinv[np.ix_(idx, idx)].copy()
         box = max(64, 4 * m + 4)

@@ -22,6 +22,7 @@ from .kernels.contact import (F_BASE_RES, F_LAST_BNORM, F_LAST_RES, F_MAX_RES, F
                               S_GUESS_DROPPED, S_GUESS_KEPT, S_ITERS, S_PREPARED, S_REFINES, S_ROUNDS,
                               S_SNAPPED, S_SOLVES, S_UNIT_ITERS, difference_quotients, extrapolate,
                               predicted, rhs_norm, snap_rounds, solve_on_set)
+from .kernels.fft import inverse_kernel
 from .kernels.ops import PRE_FFT, FFTData
 from .operators import pre_data
 
@@ -199,11 +200,11 @@ def decision_bounds(op) -> tuple[float, float]:
     round to tol, with no such bound at hand."""
     if not isinstance(op, FFTData):
         return 0.0, 0.0
-    sym, P = op.sym_full, op.sym_full.shape[1]
+    sym = op.sym_full
     lam = float(sym.min())
     if not lam > 0.0:
         return 0.0, 0.0      # no positive lower bound (a run refused upstream): no loose rounds
-    inv_diag = float(np.fft.irfft2(1.0 / sym.T, s=(P, P))[0, 0])   # sym is transposed (fft.symbol)
+    inv_diag = float(inverse_kernel(sym)[0, 0])
     return float(np.sqrt(inv_diag / lam)), float(np.sqrt(max(op.diag.max() / lam - 1.0, 0.0)))
 
 
